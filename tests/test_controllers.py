@@ -1,0 +1,44 @@
+"""Reference controllers: what zero effort and a hand-made swing-up reach."""
+
+import math
+
+import numpy as np
+import pytest
+
+from lonlib.controllers import SwingUpBalanceController, decode_sensors, zero_controller
+from lonlib.pendulum import EndReason, PendulumConfig, evaluate, sensors
+
+
+@pytest.mark.parametrize("n_carts", [1, 2])
+def test_zero_controller_scores_zero_and_survives(n_carts):
+    cfg = PendulumConfig(n_carts=n_carts)
+    result = evaluate(zero_controller(cfg), cfg)
+    assert result.fitness[0] == 0.0
+    assert result.end_reason[0] == EndReason.STEP_LIMIT
+
+
+@pytest.mark.parametrize("n_carts", [1, 2])
+def test_swing_up_controller_keeps_rods_upright_most_of_the_episode(n_carts):
+    cfg = PendulumConfig(n_carts=n_carts)
+    result = evaluate(SwingUpBalanceController(cfg), cfg)
+    assert result.fitness[0] > 0.75
+    assert result.end_reason[0] == EndReason.STEP_LIMIT
+
+
+def test_swing_up_works_in_acceleration_motor_mode():
+    cfg = PendulumConfig(n_carts=1, motor="acceleration")
+    assert evaluate(SwingUpBalanceController(cfg), cfg).fitness[0] > 0.5
+
+
+def test_decode_sensors_inverts_table_one_inside_the_ranges():
+    cfg = PendulumConfig(n_carts=2)
+    rng = np.random.default_rng(0)
+    phi = rng.uniform(0, 2 * math.pi, size=(50, 2))
+    v = rng.uniform(-2, 2, size=(50, 2))
+    w = rng.uniform(-5 * math.pi, 5 * math.pi, size=(50, 2))
+    x = np.tile(cfg.initial_positions(), (50, 1))
+    decoded = decode_sensors(cfg, sensors(cfg, x, v, phi, w))
+    theta = np.where(phi > math.pi, phi - 2 * math.pi, phi)
+    np.testing.assert_allclose(decoded.theta, theta, atol=1e-9)
+    np.testing.assert_allclose(decoded.x_dot, v, atol=1e-12)
+    np.testing.assert_allclose(decoded.theta_dot, w, atol=1e-9)

@@ -1,0 +1,323 @@
+"""Physics, sensors, termination, batching and configuration of the simulator."""
+
+import math
+
+import numpy as np
+import pytest
+
+from lonlib.pendulum import (
+    STEP_CAP,
+    CoupledPendulums,
+    EndReason,
+    PendulumConfig,
+    evaluate,
+    motor_command,
+    sensors,
+    total_energy,
+    wrap_angle,
+)
+
+FRICTIONLESS = {"cart_friction": 0.0, "hinge_friction": 0.0}
+
+
+def energy_drift(substeps: int, integrator: str = "euler") -> float:
+    cfg = PendulumConfig(
+        n_carts=1,
+        substeps=substeps,
+        integrator=integrator,
+        track_half_length_base=100.0,
+        **FRICTIONLESS,
+    )
+    sim = CoupledPendulums(cfg)
+    sim.x_dot[:], sim.phi[:], sim.phi_dot[:] = 0.3, 2.0, 1.5
+    e0 = total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)
+    drift = 0.0
+    for _ in range(500):
+        sim.step(np.full((1, 1), 0.5))
+        e = total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)
+        drift = max(drift, float(np.abs(e - e0).max()))
+    assert not sim.done.any()
+    return drift
+
+
+def test_zero_input_frictionless_energy_within_euler_bound_that_shrinks_with_substeps():
+    # Explicit Euler's global error over a fixed horizon is O(h): bound it by C h with
+    # h = dt / substeps (C = 50 J/s over these 10 s), and ten times the substeps must cut
+    # the drift at least five-fold.
+    drifts = {s: energy_drift(s) for s in (1, 10, 100)}
+    for substeps, drift in drifts.items():
+        assert drift < 50.0 * 0.02 / substeps
+    assert drifts[10] < drifts[1] / 5
+    assert drifts[100] < drifts[10] / 5
+
+
+def test_semi_implicit_integrator_also_converges():
+    assert energy_drift(10, "semi-implicit") < energy_drift(1, "semi-implicit")
+
+
+def test_energy_is_not_conserved_with_friction():
+    cfg = PendulumConfig(n_carts=1, cart_friction=0.0, hinge_friction=0.05, substeps=50)
+    sim = CoupledPendulums(cfg)
+    sim.phi[:], sim.phi_dot[:] = 2.0, 0.0
+    e0 = total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)
+    for _ in range(300):
+        sim.step(np.full((1, 1), 0.5))
+    assert total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)[0, 0] < e0[0, 0] - 0.01
+
+
+def one_cart_sensors(phi=math.pi, x=0.0, v=0.0, w=0.0):
+    cfg = PendulumConfig(n_carts=1)
+    arr = lambda value: np.array([[value]], dtype=float)  # noqa: E731
+    return sensors(cfg, arr(x), arr(v), arr(phi), arr(w))[0]
+
+
+@pytest.mark.parametrize(
+    ("phi", "expected"),
+    [
+        (0.0, [1, 0, 0, 0]),
+        (math.pi / 4, [0.5, 0, 0, 0]),
+        (math.pi / 2, [0, 0, 1, 0]),
+        (3 * math.pi / 4, [0, 0, 0.5, 0]),
+        (math.pi, [0, 0, 0, 0]),
+        (5 * math.pi / 4, [0, 0, 0, 0.5]),
+        (3 * math.pi / 2 - 1e-9, [0, 0, 0, 1]),
+        (3 * math.pi / 2, [0, 0, 0, 0]),
+        (7 * math.pi / 4, [0, 0.5, 0, 0]),
+        (2 * math.pi - 1e-9, [0, 1, 0, 0]),
+    ],
+)
+def test_angle_sensors_at_every_quadrant_edge(phi, expected):
+    np.testing.assert_allclose(one_cart_sensors(phi=phi)[:4], expected, atol=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("v", "w", "expected"),
+    [
+        (-2.0, 0.0, [1, 0, 0, 0]),
+        (-7.0, 0.0, [1, 0, 0, 0]),  # saturates
+        (1.0, 0.0, [0, 0.5, 0, 0]),
+        (2.0, 0.0, [0, 1, 0, 0]),
+        (0.0, -5 * math.pi, [0, 0, 1, 0]),
+        (0.0, 2.5 * math.pi, [0, 0, 0, 0.5]),
+        (0.0, 40.0, [0, 0, 0, 1]),  # saturates
+    ],
+)
+def test_velocity_sensors_and_saturation(v, w, expected):
+    np.testing.assert_allclose(one_cart_sensors(v=v, w=w)[6:], expected, atol=1e-12)
+
+
+def test_proximity_to_neighbour_and_track_end():
+    cfg = PendulumConfig(n_carts=2)
+    half = cfg.track_half_length
+    zeros = np.zeros((3, 2))
+    x = np.array(
+        [
+            [-0.1, 0.1],  # neighbours touching (distance = width)
+            [-1.0, 1.0],  # neighbours at the tether length
+            [-half + 0.1, -half + 1.0],  # left cart touching the track end
+        ]
+    )
+    s = sensors(cfg, x, zeros, np.full((3, 2), np.pi), zeros).reshape(3, 2, 10)
+    assert s[0, 0, 5] == pytest.approx(1.0) and s[0, 1, 4] == pytest.approx(1.0)
+    assert s[1, 0, 5] == pytest.approx(0.0) and s[1, 1, 4] == pytest.approx(0.0)
+    assert s[2, 0, 4] == pytest.approx(1.0)  # track end reads like a touching neighbour
+    mid = (cfg.tether_length - 0.9) / (cfg.tether_length - cfg.cart_width)
+    assert s[2, 0, 5] == pytest.approx(mid)
+    assert s[0, 0, 4] == 0.0  # the far track end is out of range
+
+
+def test_action_conversion_matches_paper():
+    np.testing.assert_allclose(
+        motor_command(np.array([0.0, 0.25, 0.5, 0.75, 1.0])), [2.0, 1.0, 0.0, -1.0, -2.0]
+    )
+    # a > 0.5 pushes right: the cart accelerates in +x
+    cfg = PendulumConfig(n_carts=1)
+    sim = CoupledPendulums(cfg)
+    for _ in range(3):
+        sim.step(np.ones((1, 1)))
+    assert sim.x_dot[0, 0] > 0
+
+
+def constant_velocity_sim(n, x, x_dot):
+    cfg = PendulumConfig(n_carts=n, motor="acceleration", **FRICTIONLESS)
+    sim = CoupledPendulums(cfg)
+    sim.x[:], sim.x_dot[:] = x, x_dot
+    return sim
+
+
+@pytest.mark.parametrize(
+    ("n", "x", "x_dot", "reason", "step"),
+    [
+        # gap 1 - 0.036 k drops below the 0.2 m cart width at k = 23
+        (2, [-0.5, 0.5], [0.9, -0.9], EndReason.COLLISION, 23),
+        # gap 1 + 0.036 k passes the 2.0 m tether at k = 28
+        (2, [-0.5, 0.5], [-0.9, 0.9], EndReason.TETHER, 28),
+        # the edge 0.018 k + 0.1 passes the 2.4 m track end at k = 128
+        (1, [0.0], [0.9], EndReason.BOUNDARY, 128),
+    ],
+)
+def test_each_termination_rule_fires_at_its_step(n, x, x_dot, reason, step):
+    sim = constant_velocity_sim(n, x, x_dot)
+    for k in range(1, step + 5):
+        result = sim.step(np.full((1, n), 0.5))
+        if k < step:
+            assert not result.terminated[0], k
+        elif k == step:
+            assert result.terminated[0] and not result.truncated[0]
+            assert result.end_reason[0] == reason
+            frozen = sim.x.copy()
+        else:
+            assert not result.terminated[0] and result.reward[0] == 0.0
+            np.testing.assert_array_equal(sim.x, frozen)
+    assert sim.end_reason[0] == reason and sim.step_count[0] == step
+
+
+def test_step_limit_truncates():
+    cfg = PendulumConfig(n_carts=1, steps=37)
+    sim = CoupledPendulums(cfg)
+    for k in range(1, 38):
+        result = sim.step(np.full((1, 1), 0.5))
+        assert result.truncated[0] == (k == 37)
+    assert sim.end_reason[0] == EndReason.STEP_LIMIT and not result.terminated[0]
+
+
+def linear_weights(seed, n, batch):
+    return np.random.default_rng(seed).normal(0, 3, size=(batch, 10 * n, n))
+
+
+def linear_policy(seed, n, batch, weights=None):
+    """Row b of the batch is driven by its own random linear-sigmoid policy."""
+    weights = linear_weights(seed, n, batch) if weights is None else weights
+    return lambda obs: 1 / (1 + np.exp(-np.einsum("bi,bij->bj", obs, weights)))
+
+
+def trajectory(cfg, policy, batch, seed=None, steps=300):
+    sim = CoupledPendulums(cfg, batch, seed)
+    states = []
+    for _ in range(steps):
+        sim.step(policy(sim.observe()))
+        states.append(np.stack([sim.x, sim.x_dot, sim.phi, sim.phi_dot]))
+    return np.stack(states), sim
+
+
+def test_batch_equals_single_runs():
+    cfg = PendulumConfig(n_carts=2)
+    batch = 5
+    policy = linear_policy(3, 2, batch)
+    together, sim = trajectory(cfg, policy, batch)
+    assert len(set(sim.end_reason.tolist())) > 1 or sim.done.any()
+    weights = linear_weights(3, 2, batch)
+    for b in range(batch):
+        alone, single = trajectory(cfg, linear_policy(0, 2, 1, weights[b : b + 1]), 1)
+        np.testing.assert_array_equal(alone[:, :, 0], together[:, :, b])
+        assert single.fitness[0] == sim.fitness[b]
+        assert single.end_reason[0] == sim.end_reason[b]
+
+
+def test_same_seed_same_trajectory_and_different_seed_differs():
+    cfg = PendulumConfig(n_carts=2, initial_noise=0.05)
+    policy = linear_policy(1, 2, 3)
+    a, _ = trajectory(cfg, policy, 3, seed=11, steps=50)
+    b, _ = trajectory(cfg, policy, 3, seed=11, steps=50)
+    c, _ = trajectory(cfg, policy, 3, seed=12, steps=50)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_fitness_modes_all_versus_mean():
+    # one rod held upright, one hanging, no motion: "all" scores 0, "mean" scores 1/2
+    for mode, expected in (("all", 0.0), ("mean", 0.5)):
+        cfg = PendulumConfig(
+            n_carts=2,
+            fitness_mode=mode,
+            steps=10,
+            motor="acceleration",
+            gravity=1e-9,
+            **FRICTIONLESS,
+        )
+        sim = CoupledPendulums(cfg)
+        sim.phi[:] = [[0.0, np.pi]]
+        while not sim.done.all():
+            sim.step(np.full((1, 2), 0.5))
+        assert sim.fitness[0] == pytest.approx(expected)
+
+
+def test_upright_reward_is_the_fitness_increment_and_height_reward_is_bounded():
+    cfg = PendulumConfig(n_carts=1, reward="upright", steps=20, gravity=1e-9)
+    sim = CoupledPendulums(cfg)
+    sim.phi[:] = 0.1
+    total = sum(sim.step(np.full((1, 1), 0.5)).reward[0] for _ in range(20))
+    assert total == pytest.approx(sim.fitness[0]) and total == pytest.approx(1.0)
+    cfg = PendulumConfig(n_carts=1)
+    sim = CoupledPendulums(cfg)
+    sim.phi[:] = 0.0
+    assert sim.step(np.full((1, 1), 0.5)).reward[0] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_wrap_angle():
+    np.testing.assert_allclose(
+        wrap_angle(np.array([0.0, np.pi, 1.5 * np.pi, -np.pi])), [0.0, np.pi, -0.5 * np.pi, np.pi]
+    )
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("n_carts", 0),
+        ("n_carts", 6),
+        ("n_carts", 2.0),
+        ("steps", STEP_CAP + 1),
+        ("steps", 0),
+        ("substeps", 0),
+        ("gravity", 0.0),
+        ("cart_mass", -1.0),
+        ("pole_mass", 0.0),
+        ("pole_half_length", -0.5),
+        ("cart_friction", -0.1),
+        ("hinge_friction", float("nan")),
+        ("dt", 0.0),
+        ("dt", float("inf")),
+        ("motor_gain", 0.0),
+        ("cart_width", 0.0),
+        ("tether_length", 0.1),
+        ("initial_spacing", 3.0),
+        ("track_half_length_base", -1.0),
+        ("track_half_length_per_cart", -0.1),
+        ("velocity_range", 0.0),
+        ("angular_velocity_range", -1.0),
+        ("upright_angle", 0.0),
+        ("upright_angle", 4.0),
+        ("integrator", "rk4"),
+        ("motor", "torque"),
+        ("fitness_mode", "sum"),
+        ("reward", "sparse"),
+        ("termination_penalty", 1.0),
+        ("initial_noise", -0.1),
+        ("initial_noise", 0.9),
+    ],
+)
+def test_every_invalid_field_is_refused_by_name(field, value):
+    with pytest.raises(ValueError, match=field):
+        PendulumConfig(**{field: value})
+
+
+def test_unknown_key_is_refused_by_name():
+    with pytest.raises(ValueError, match="velocityy"):
+        PendulumConfig.from_mapping({"n_carts": 2, "velocityy": 1.0})
+    assert PendulumConfig.from_mapping({"n_carts": 3}).n_carts == 3
+
+
+def test_track_grows_with_carts_and_all_start_positions_are_valid():
+    for n in range(1, 6):
+        cfg = PendulumConfig(n_carts=n)
+        assert cfg.track_half_length == pytest.approx(2.4 + 0.55 * (n - 1))
+        sim = CoupledPendulums(cfg)
+        assert (sim._termination_reason() == EndReason.RUNNING).all()
+        assert sim.observe().shape == (1, 10 * n)
+
+
+def test_evaluate_reports_fitness_and_reason_per_environment():
+    cfg = PendulumConfig(n_carts=2, steps=200)
+    full_push = evaluate(lambda o: np.ones((len(o), 2)), cfg, batch_size=3)
+    assert (full_push.end_reason == EndReason.BOUNDARY).all()
+    assert (full_push.fitness == 0).all() and (full_push.steps < 200).all()
