@@ -60,9 +60,9 @@ def zero_controller(config: PendulumConfig):
 class SwingUpGains:
     """Tuning of :class:`SwingUpBalanceController` (our values, see README)."""
 
-    energy_gain: float = 5.0  # desired accel per (J * rad/s) of energy error
+    energy_gain: float = 10.0  # desired accel per (J * rad/s) of energy error
     velocity_damping: float = 3.0  # cart-velocity feedback while pumping [1/s]
-    capture_angle: float = 0.5  # switch to the balance law inside this |theta| [rad]
+    capture_angle: float = 0.6  # switch to the balance law inside this |theta| [rad]
     lqr_weights: tuple[float, float, float] = (20.0, 1.0, 2.0)  # theta, theta_dot, x_dot
     lqr_input_weight: float = 0.5
     centring_gain: float = 3.0  # accel per unit of (proximity right - proximity left) [m/s^2]

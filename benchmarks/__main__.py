@@ -1,0 +1,10 @@
+"""`python -m benchmarks`: run every benchmark, print tables, write benchmarks/results/*.json."""
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from benchmarks import simulator  # noqa: E402
+
+if __name__ == "__main__":
+    simulator.main()

@@ -1,0 +1,156 @@
+"""Actor and Critic networks with a leading agent dimension, as flat vectors (paper Eq. 1).
+
+Both are plain MLPs with a sigmoid on every layer except the Critic's output (paper
+§III-B): Actor ``[10n, 20, 20, 20, n]``, Critic ``[11n, 20, 20, 20, 1]`` (2623 parameters
+together for two carts). A network's parameters are one flat float vector in the paper's
+order (Eq. 1): layer by layer, the weights (row-major ``[out, in]``, i.e. neuron by neuron)
+then the biases.
+
+:class:`BatchedMLP` holds ``k`` independent networks of one shape (``[k, out, in]`` weights)
+so ``k`` agents train in one batched matrix product; ``k = 1`` is the single-agent case.
+:func:`forward_numpy` evaluates fixed parameters in numpy (fastest for rollouts).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import torch
+
+HIDDEN = (20, 20, 20)
+
+
+@dataclass(frozen=True)
+class NetSpec:
+    """Shape of one MLP: layer sizes including input and output, and the output squashing."""
+
+    sizes: tuple[int, ...]
+    sigmoid_output: bool
+
+    @cached_property
+    def layers(self) -> tuple[tuple[int, int], ...]:
+        """``(in, out)`` of every layer."""
+        return tuple(zip(self.sizes[:-1], self.sizes[1:], strict=True))
+
+    @cached_property
+    def offsets(self) -> tuple[tuple[int, int, int], ...]:
+        """``(weight start, bias start, bias end)`` of every layer in the flat vector."""
+        out, start = [], 0
+        for fan_in, fan_out in self.layers:
+            bias = start + fan_in * fan_out
+            out.append((start, bias, bias + fan_out))
+            start = bias + fan_out
+        return tuple(out)
+
+    @property
+    def n_params(self) -> int:
+        """Number of trainable parameters (length of the flat vector)."""
+        return self.offsets[-1][2]
+
+    def unflatten(self, flat: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Views ``(W [..., out, in], b [..., out])`` per layer of flat vectors ``[..., P]``."""
+        if flat.shape[-1] != self.n_params:
+            raise ValueError(f"flat parameters must have {self.n_params} entries, got {flat.shape}")
+        lead = flat.shape[:-1]
+        return [
+            (flat[..., w:b].reshape(*lead, fan_out, fan_in), flat[..., b:e])
+            for (fan_in, fan_out), (w, b, e) in zip(self.layers, self.offsets, strict=True)
+        ]
+
+    def initial(self, rng: np.random.Generator) -> np.ndarray:
+        """A fresh flat vector, PyTorch ``nn.Linear``'s default: U(-1/sqrt(in), 1/sqrt(in))."""
+        parts = []
+        for fan_in, fan_out in self.layers:
+            bound = 1.0 / math.sqrt(fan_in)
+            parts.append(rng.uniform(-bound, bound, size=fan_in * fan_out))
+            parts.append(rng.uniform(-bound, bound, size=fan_out))
+        return np.concatenate(parts).astype(np.float32)
+
+
+def actor_spec(n_carts: int) -> NetSpec:
+    """Actor: all carts' sensors in, one action in [0, 1] per cart out."""
+    return NetSpec((10 * n_carts, *HIDDEN, n_carts), sigmoid_output=True)
+
+
+def critic_spec(n_carts: int) -> NetSpec:
+    """Critic: sensors and actions in, one unbounded Q-value out."""
+    return NetSpec((11 * n_carts, *HIDDEN, 1), sigmoid_output=False)
+
+
+def _sigmoid(z: np.ndarray) -> np.ndarray:
+    return 0.5 * (1.0 + np.tanh(0.5 * z))  # overflow-free logistic
+
+
+def forward_numpy(spec: NetSpec, flat: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """Evaluate fixed parameters in numpy.
+
+    ``flat`` is one vector ``[P]`` (shared by every row of ``inputs [B, in]``) or one vector
+    per row ``[B, P]`` (row ``b`` evaluated by network ``b``, for batched evaluation of many
+    policies). Returns ``[B, out]``.
+    """
+    flat = np.asarray(flat)
+    h = np.asarray(inputs, dtype=flat.dtype)
+    layers = spec.unflatten(flat)
+    for i, (weight, bias) in enumerate(layers):
+        if flat.ndim == 1:
+            h = h @ weight.T + bias
+        else:
+            h = np.einsum("bi,boi->bo", h, weight) + bias
+        if i < len(layers) - 1 or spec.sigmoid_output:
+            h = _sigmoid(h)
+    return h
+
+
+class BatchedMLP(torch.nn.Module):
+    """``k`` independent MLPs of one :class:`NetSpec`, evaluated with batched matmuls.
+
+    ``forward(x)`` takes ``[k, B, in]`` and returns ``[k, B, out]``; agent ``i`` only ever
+    sees its own weights, so gradients never mix between agents.
+    """
+
+    def __init__(self, spec: NetSpec, flat: torch.Tensor | np.ndarray) -> None:
+        super().__init__()
+        self.spec = spec
+        flat = torch.as_tensor(np.asarray(flat, dtype=np.float32))
+        if flat.ndim != 2:
+            raise ValueError(f"flat parameters must be [k, {spec.n_params}], got {flat.shape}")
+        self.weights = torch.nn.ParameterList()
+        self.biases = torch.nn.ParameterList()
+        for weight, bias in spec.unflatten(flat):
+            self.weights.append(torch.nn.Parameter(weight.clone().contiguous()))
+            self.biases.append(torch.nn.Parameter(bias.clone().contiguous()))
+
+    @property
+    def agents(self) -> int:
+        """Number of independent networks ``k``."""
+        return self.weights[0].shape[0]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``[k, B, in]`` -> ``[k, B, out]``."""
+        last = len(self.weights) - 1
+        for i, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
+            x = torch.baddbmm(bias.unsqueeze(1), x, weight.transpose(1, 2))
+            if i < last or self.spec.sigmoid_output:
+                x = torch.sigmoid(x)
+        return x
+
+    def flat(self) -> np.ndarray:
+        """Current parameters as flat vectors ``[k, P]`` (float32, Eq. 1 order)."""
+        with torch.no_grad():
+            parts = []
+            for weight, bias in zip(self.weights, self.biases, strict=True):
+                parts += [weight.reshape(self.agents, -1), bias]
+            return torch.cat(parts, dim=1).cpu().numpy()
+
+    def load_flat(self, flat: np.ndarray | torch.Tensor) -> None:
+        """Overwrite the parameters from flat vectors ``[k, P]``."""
+        flat = torch.as_tensor(np.asarray(flat, dtype=np.float32))
+        with torch.no_grad():
+            for (weight, bias), (w_new, b_new) in zip(
+                zip(self.weights, self.biases, strict=True), self.spec.unflatten(flat), strict=True
+            ):
+                weight.copy_(w_new)
+                bias.copy_(b_new)
