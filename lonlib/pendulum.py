@@ -158,6 +158,7 @@ class PendulumConfig:
     reward: str = "height"
     termination_penalty: float = -5.0
     initial_noise: float = 0.0
+    initial_angle: float = math.pi
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -199,6 +200,8 @@ class PendulumConfig:
             raise ValueError(f"upright_angle must be in (0, pi], got {self.upright_angle!r}")
         if self.termination_penalty > 0:
             raise ValueError(f"termination_penalty must be <= 0, got {self.termination_penalty!r}")
+        if not 0 <= self.initial_angle < 2 * math.pi:
+            raise ValueError(f"initial_angle must be in [0, 2 pi), got {self.initial_angle!r}")
         if not 0 <= self.initial_noise <= 0.5:
             raise ValueError(f"initial_noise must be in [0, 0.5], got {self.initial_noise!r}")
         if self.tether_length <= self.cart_width:
@@ -352,7 +355,7 @@ class CoupledPendulums:
         shape = (self.batch_size, config.n_carts)
         self.x = np.zeros(shape)
         self.x_dot = np.zeros(shape)
-        self.phi = np.full(shape, np.pi)
+        self.phi = np.full(shape, config.initial_angle)
         self.phi_dot = np.zeros(shape)
         self.step_count = np.zeros(self.batch_size, dtype=np.int64)
         self.upright_sum = np.zeros(self.batch_size)
@@ -372,20 +375,24 @@ class CoupledPendulums:
         """``[B]`` running fitness (Algorithm 1): upright sum / nominal steps."""
         return self.upright_sum / self.config.steps
 
-    def reset(self, mask: np.ndarray | None = None) -> None:
+    def reset(self, mask: np.ndarray | None = None, noise: np.ndarray | None = None) -> None:
         """Put environments (all, or those where ``mask`` is true) in the initial state.
 
-        Carts at rest evenly spaced about 0, rods hanging. With ``initial_noise`` > 0 each
-        of x, x_dot, phi, phi_dot gets uniform noise in ``[-noise, noise]`` drawn from the
-        simulator's generator (``seed`` at construction), so a seed fixes the trajectory.
+        Carts at rest evenly spaced about 0, rods at ``initial_angle`` (default hanging).
+        With ``initial_noise`` > 0 each of x, x_dot, phi, phi_dot gets uniform noise in
+        ``[-noise, noise]`` drawn from the simulator's generator (``seed`` at construction),
+        so a seed fixes the trajectory.
+        ``noise`` (``[4, k, n]`` for the ``k`` environments reset, already scaled) overrides
+        that draw, for callers that give every environment its own random stream.
         """
         cfg = self.config
         index = np.arange(self.batch_size) if mask is None else np.flatnonzero(mask)
         k, n = index.size, cfg.n_carts
         x0 = np.broadcast_to(cfg.initial_positions(), (k, n))
-        state = [x0, np.zeros((k, n)), np.full((k, n), np.pi), np.zeros((k, n))]
-        if cfg.initial_noise > 0:
+        state = [x0, np.zeros((k, n)), np.full((k, n), cfg.initial_angle), np.zeros((k, n))]
+        if noise is None and cfg.initial_noise > 0:
             noise = self.rng.uniform(-cfg.initial_noise, cfg.initial_noise, size=(4, k, n))
+        if noise is not None:
             state = [s + e for s, e in zip(state, noise, strict=True)]
         self.x[index], self.x_dot[index], self.phi[index], self.phi_dot[index] = state
         self.phi[index] = np.mod(self.phi[index], 2 * np.pi)

@@ -294,6 +294,7 @@ def test_wrap_angle():
         ("termination_penalty", 1.0),
         ("initial_noise", -0.1),
         ("initial_noise", 0.9),
+        ("initial_angle", 7.0),
     ],
 )
 def test_every_invalid_field_is_refused_by_name(field, value):

@@ -1,0 +1,365 @@
+"""DDPG as the local search ``F(theta, omega, e, h)`` of the paper, k agents at a time.
+
+One call trains ``k`` independent agents in lockstep: each has its own environment, replay
+buffer, exploration noise, sampling stream and Adam state, and all ``k`` updates run as one
+batched matrix product per layer (:class:`lonlib.nets.BatchedMLP`). ``k = 1`` is the
+single-agent case of the same code. Read top to bottom, one environment step is:
+
+1. act: uniform random actions during the warm-up, then the Actor plus N(0, sigma) noise,
+   clipped to [0, 1];
+2. step every agent's environment, store ``(s, a, r, s', terminated)`` in its replay buffer;
+3. update (after the warm-up): sample ``batch_size`` transitions per agent, critic towards
+   ``r + gamma (1 - terminated) Q'(s', mu'(s'))`` (no bootstrapping past a collision, tether
+   or boundary end; the step limit bootstraps), actor up the critic's gradient, soft targets;
+4. when an agent's episode ends: greedy fitness (Algorithm 1, no noise) of its current
+   Actor; keep the parameters if it beats the best so far; reset its environment.
+
+An agent stops when its greedy fitness has not improved for ``patience_steps`` environment
+steps (never before ``min_steps``) or at ``max_steps``. It returns the best greedy fitness
+seen (the starting parameters included) and the parameters at that point.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from lonlib.nets import BatchedMLP, actor_spec, critic_spec, forward_numpy
+from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
+
+
+@dataclass(frozen=True)
+class DDPGConfig:
+    """DDPG hyperparameters (the paper's ``h``). Paper values: buffer, batch, noise, lr,
+    gamma. Ours: tau, the warm-up and the step budget (README, "DDPG local search")."""
+
+    buffer_size: int = 40_000
+    batch_size: int = 2000
+    noise_std: float = 0.1
+    learning_rate: float = 1e-3
+    gamma: float = 0.99
+    tau: float = 0.005
+    warmup_steps: int = 2000
+    max_steps: int = 150_000
+    min_steps: int = 60_000
+    patience_steps: int = 40_000
+    eval_seed: int = 0
+    device: str = "cpu"
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        checks = {
+            "buffer_size": (1, None),
+            "batch_size": (1, None),
+            "warmup_steps": (1, None),
+            "max_steps": (1, None),
+            "min_steps": (0, None),
+            "patience_steps": (1, None),
+            "threads": (1, 256),
+        }
+        for name, (low, high) in checks.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            if value < low or (high is not None and value > high):
+                allowed = f">= {low}" if high is None else f"in [{low}, {high}]"
+                raise ValueError(f"{name} must be {allowed}, got {value!r}")
+        for name, low, high, low_open in (
+            ("noise_std", 0.0, 1.0, False),
+            ("learning_rate", 0.0, 1.0, True),
+            ("gamma", 0.0, 1.0, False),
+            ("tau", 0.0, 1.0, True),
+        ):
+            value = getattr(self, name)
+            ok = isinstance(value, (int, float)) and np.isfinite(value)
+            ok = ok and (value > low if low_open else value >= low) and value <= high
+            if not ok:
+                bracket = "(" if low_open else "["
+                raise ValueError(f"{name} must be in {bracket}{low}, {high}], got {value!r}")
+        if self.min_steps > self.max_steps:
+            raise ValueError(
+                f"min_steps must be <= max_steps ({self.max_steps}), got {self.min_steps!r}"
+            )
+        try:
+            torch.device(self.device)
+        except RuntimeError as error:
+            raise ValueError(f"device {self.device!r} is not a torch device: {error}") from None
+
+
+@dataclass
+class EpisodeRecord:
+    """One training episode of one agent."""
+
+    episode: int
+    env_steps: int  # the agent's environment steps when the episode ended
+    episode_return: float
+    episode_length: int
+    greedy_fitness: float
+    critic_loss: float  # mean over the episode's updates (nan before the warm-up ends)
+    actor_loss: float
+    seconds: float  # since the local search started
+
+
+@dataclass
+class LocalSearchResult:
+    """What ``F(theta, omega, e, h)`` returns for one agent."""
+
+    fitness: float
+    theta: np.ndarray  # Actor parameters at the best greedy fitness, float32 [P_actor]
+    omega: np.ndarray  # Critic parameters at that point, float32 [P_critic]
+    initial_fitness: float
+    env_steps: int
+    seconds: float
+    stop_reason: str  # "patience" or "budget"
+    history: list[EpisodeRecord] = field(default_factory=list)
+
+
+def check_parameters(name: str, values: np.ndarray, size: int, agents: int) -> np.ndarray:
+    """Validate flat parameter vectors ``[k, size]`` (finite, right shape) and return float32."""
+    values = np.asarray(values, dtype=np.float32)
+    if values.ndim == 1:
+        values = values[None]
+    if values.shape != (agents, size):
+        raise ValueError(f"{name} must have shape ({agents}, {size}), got {values.shape}")
+    if not np.isfinite(values).all():
+        raise ValueError(f"{name} contains NaN or infinite parameters")
+    return values
+
+
+def local_search(
+    theta: np.ndarray,
+    omega: np.ndarray,
+    env_config: PendulumConfig,
+    hp: DDPGConfig,
+    seed: int,
+    progress: bool = False,
+) -> LocalSearchResult:
+    """``F(theta, omega, e, h)`` for one agent: DDPG from the given Actor and Critic."""
+    return local_search_batch(theta[None], omega[None], env_config, hp, [seed], progress)[0]
+
+
+def local_search_batch(
+    thetas: np.ndarray,
+    omegas: np.ndarray,
+    env_config: PendulumConfig,
+    hp: DDPGConfig,
+    seeds: Sequence[int],
+    progress: bool = False,
+) -> list[LocalSearchResult]:
+    """Train ``k = len(seeds)`` independent agents together; one result per agent.
+
+    Agent ``i`` starts from ``thetas[i]``, ``omegas[i]`` with an empty replay buffer and
+    target networks copied from them, and draws every random number from
+    ``np.random.default_rng(seeds[i])``: its result does not depend on the other agents.
+    """
+    k = len(seeds)
+    n = env_config.n_carts
+    a_spec, c_spec = actor_spec(n), critic_spec(n)
+    thetas = check_parameters("theta", thetas, a_spec.n_params, k)
+    omegas = check_parameters("omega", omegas, c_spec.n_params, k)
+    torch.set_num_threads(hp.threads)
+    device = torch.device(hp.device)
+    rngs = [np.random.default_rng(seed) for seed in seeds]
+    start_time = time.perf_counter()
+
+    actor = BatchedMLP(a_spec, thetas).to(device)
+    critic = BatchedMLP(c_spec, omegas).to(device)
+    actor_target, critic_target = copy.deepcopy(actor), copy.deepcopy(critic)
+    for target in (actor_target, critic_target):
+        target.requires_grad_(False)
+    adam = {"lr": hp.learning_rate, "fused": device.type in ("cpu", "cuda")}
+    actor_opt = torch.optim.Adam(actor.parameters(), **adam)
+    critic_opt = torch.optim.Adam(critic.parameters(), **adam)
+    replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, device)
+
+    def greedy_fitness(flat_theta: np.ndarray) -> float:
+        policy = lambda obs: forward_numpy(a_spec, flat_theta, obs)  # noqa: E731
+        return float(evaluate(policy, env_config, 1, hp.eval_seed).fitness[0])
+
+    best = [greedy_fitness(thetas[i]) for i in range(k)]
+    results = [
+        LocalSearchResult(
+            fitness=best[i],
+            theta=thetas[i].copy(),
+            omega=omegas[i].copy(),
+            initial_fitness=best[i],
+            env_steps=0,
+            seconds=0.0,
+            stop_reason="budget",
+        )
+        for i in range(k)
+    ]
+    last_improvement = np.zeros(k, dtype=np.int64)
+    active = np.ones(k, dtype=bool)
+
+    sim = CoupledPendulums(env_config, k)
+    _reset(sim, rngs, np.ones(k, dtype=bool))
+    obs = sim.observe().astype(np.float32)
+    episode_return = np.zeros(k)
+    episode_index = np.zeros(k, dtype=np.int64)
+    losses: list[list[tuple[float, float]]] = [[] for _ in range(k)]
+
+    bar = tqdm(total=hp.max_steps, desc=f"DDPG x{k}", disable=not progress, leave=False)
+    step = 0
+    while active.any():
+        # 1. act
+        if step < hp.warmup_steps:
+            actions = np.stack([rng.uniform(0.0, 1.0, n) for rng in rngs])
+        else:
+            with torch.no_grad():
+                mu = actor(torch.as_tensor(obs, device=device)[:, None, :])[:, 0, :]
+            noise = np.stack([rng.normal(0.0, hp.noise_std, n) for rng in rngs])
+            actions = np.clip(mu.cpu().numpy().astype(np.float64) + noise, 0.0, 1.0)
+        # 2. step and store
+        outcome = sim.step(actions)
+        next_obs = sim.observe().astype(np.float32)
+        replay.add(obs, actions, outcome.reward, next_obs, outcome.terminated)
+        episode_return += outcome.reward
+        step += 1
+        # 3. update
+        if step >= hp.warmup_steps:
+            indices = np.stack([rng.integers(0, replay.size, hp.batch_size) for rng in rngs])
+            critic_loss, actor_loss = _update(
+                replay.sample(indices), actor, critic, actor_target, critic_target,
+                actor_opt, critic_opt, hp,
+            )  # fmt: skip
+            for i in np.flatnonzero(active):
+                losses[i].append((critic_loss[i], actor_loss[i]))
+        # 4. episode ends: greedy fitness, best parameters, reset
+        ended = outcome.terminated | outcome.truncated
+        if ended.any():
+            flat_actor = actor.flat()
+            flat_critic = critic.flat() if (ended & active).any() else None
+            for i in np.flatnonzero(ended & active):
+                fitness = greedy_fitness(flat_actor[i])
+                if fitness > results[i].fitness:
+                    results[i].fitness = fitness
+                    results[i].theta = flat_actor[i].copy()
+                    results[i].omega = flat_critic[i].copy()
+                    last_improvement[i] = step
+                episode_losses = np.array(losses[i]) if losses[i] else np.full((1, 2), np.nan)
+                results[i].history.append(
+                    EpisodeRecord(
+                        episode=int(episode_index[i]),
+                        env_steps=step,
+                        episode_return=float(episode_return[i]),
+                        episode_length=int(sim.step_count[i]),
+                        greedy_fitness=fitness,
+                        critic_loss=float(np.mean(episode_losses[:, 0])),
+                        actor_loss=float(np.mean(episode_losses[:, 1])),
+                        seconds=time.perf_counter() - start_time,
+                    )
+                )
+                losses[i] = []
+            episode_index[ended] += 1
+            episode_return[ended] = 0.0
+            _reset(sim, rngs, ended)
+            obs = sim.observe().astype(np.float32)
+        else:
+            obs = next_obs
+        # stopping rules
+        stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)
+        stop = active & (stale | (step >= hp.max_steps))
+        for i in np.flatnonzero(stop):
+            results[i].stop_reason = (
+                "budget" if step >= hp.max_steps and not stale[i] else ("patience")
+            )
+            results[i].env_steps = step
+            results[i].seconds = time.perf_counter() - start_time
+        active &= ~stop
+        if progress and step % 500 == 0:
+            bar.update(500)
+            bar.set_postfix(best=f"{max(r.fitness for r in results):.3f}", active=int(active.sum()))
+    bar.close()
+    return results
+
+
+def _reset(sim: CoupledPendulums, rngs: list[np.random.Generator], mask: np.ndarray) -> None:
+    """Reset the masked environments, each drawing its start noise from its agent's stream."""
+    noise_level = sim.config.initial_noise
+    noise = None
+    if noise_level > 0:
+        noise = np.stack(
+            [
+                rngs[i].uniform(-noise_level, noise_level, size=(4, sim.config.n_carts))
+                for i in np.flatnonzero(mask)
+            ],
+            axis=1,
+        )
+    sim.reset(mask, noise)
+
+
+class ReplayBuffer:
+    """``k`` ring buffers of transitions held as torch tensors (``[k, capacity, ...]``).
+
+    All agents step together, so one write position and one size serve every agent.
+    """
+
+    def __init__(self, agents: int, capacity: int, obs_size: int, act_size: int,
+                 device: torch.device) -> None:  # fmt: skip
+        def zeros(*shape: int) -> torch.Tensor:
+            return torch.zeros(agents, capacity, *shape, device=device)
+
+        self.obs, self.next_obs = zeros(obs_size), zeros(obs_size)
+        self.actions, self.rewards, self.not_done = zeros(act_size), zeros(1), zeros(1)
+        self.capacity, self.position, self.size = capacity, 0, 0
+        self.device = device
+        self._agents = torch.arange(agents, device=device)[:, None]
+
+    def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+            next_obs: np.ndarray, terminated: np.ndarray) -> None:  # fmt: skip
+        """Store one transition per agent (arrays with a leading agent dimension)."""
+        p = self.position
+        self.obs[:, p] = torch.as_tensor(obs)
+        self.actions[:, p] = torch.as_tensor(actions, dtype=torch.float32)
+        self.rewards[:, p, 0] = torch.as_tensor(rewards, dtype=torch.float32)
+        self.next_obs[:, p] = torch.as_tensor(next_obs)
+        self.not_done[:, p, 0] = torch.as_tensor(~terminated, dtype=torch.float32)
+        self.position = (p + 1) % self.capacity
+        self.size = min(self.size + 1, self.capacity)
+
+    def sample(self, indices: np.ndarray) -> tuple[torch.Tensor, ...]:
+        """Transitions at ``indices [k, batch]`` (agent ``i`` reads only its own buffer)."""
+        idx = torch.as_tensor(indices, device=self.device)
+        a = self._agents
+        return (self.obs[a, idx], self.actions[a, idx], self.rewards[a, idx],
+                self.next_obs[a, idx], self.not_done[a, idx])  # fmt: skip
+
+
+def _update(
+    batch: tuple[torch.Tensor, ...],
+    actor: BatchedMLP,
+    critic: BatchedMLP,
+    actor_target: BatchedMLP,
+    critic_target: BatchedMLP,
+    actor_opt: torch.optim.Optimizer,
+    critic_opt: torch.optim.Optimizer,
+    hp: DDPGConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One DDPG update of every agent; returns per-agent critic and actor losses."""
+    obs, actions, rewards, next_obs, not_done = batch
+    with torch.no_grad():
+        next_q = critic_target(torch.cat([next_obs, actor_target(next_obs)], dim=2))
+        target = rewards + hp.gamma * not_done * next_q
+    q = critic(torch.cat([obs, actions], dim=2))
+    # Per-agent mean losses, summed: each agent's gradient is exactly its own loss's.
+    critic_loss = ((q - target) ** 2).mean(dim=(1, 2))
+    critic_opt.zero_grad(set_to_none=True)
+    critic_loss.sum().backward()
+    critic_opt.step()
+
+    actor_loss = -critic(torch.cat([obs, actor(obs)], dim=2)).mean(dim=(1, 2))
+    actor_opt.zero_grad(set_to_none=True)
+    actor_loss.sum().backward()
+    actor_opt.step()
+
+    with torch.no_grad():
+        for net, target_net in ((actor, actor_target), (critic, critic_target)):
+            torch._foreach_lerp_(list(target_net.parameters()), list(net.parameters()), hp.tau)
+    return critic_loss.detach().cpu().numpy(), actor_loss.detach().cpu().numpy()
