@@ -4,7 +4,8 @@ import os
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from benchmarks import simulator  # noqa: E402
+from benchmarks import ddpg, simulator  # noqa: E402
 
 if __name__ == "__main__":
     simulator.main()
+    ddpg.main()

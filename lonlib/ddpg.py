@@ -32,6 +32,7 @@ from tqdm.auto import tqdm
 
 from lonlib.nets import BatchedMLP, actor_spec, critic_spec, forward_numpy
 from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.validation import check_field_types, check_range
 
 
 @dataclass(frozen=True)
@@ -54,34 +55,15 @@ class DDPGConfig:
     threads: int = 1
 
     def __post_init__(self) -> None:
-        checks = {
-            "buffer_size": (1, None),
-            "batch_size": (1, None),
-            "warmup_steps": (1, None),
-            "max_steps": (1, None),
-            "min_steps": (0, None),
-            "patience_steps": (1, None),
-            "threads": (1, 256),
-        }
-        for name, (low, high) in checks.items():
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise ValueError(f"{name} must be an integer, got {value!r}")
-            if value < low or (high is not None and value > high):
-                allowed = f">= {low}" if high is None else f"in [{low}, {high}]"
-                raise ValueError(f"{name} must be {allowed}, got {value!r}")
-        for name, low, high, low_open in (
-            ("noise_std", 0.0, 1.0, False),
-            ("learning_rate", 0.0, 1.0, True),
-            ("gamma", 0.0, 1.0, False),
-            ("tau", 0.0, 1.0, True),
-        ):
-            value = getattr(self, name)
-            ok = isinstance(value, (int, float)) and np.isfinite(value)
-            ok = ok and (value > low if low_open else value >= low) and value <= high
-            if not ok:
-                bracket = "(" if low_open else "["
-                raise ValueError(f"{name} must be in {bracket}{low}, {high}], got {value!r}")
+        check_field_types(self)
+        for name in ("buffer_size", "batch_size", "warmup_steps", "max_steps", "patience_steps"):
+            check_range(name, getattr(self, name), 1)
+        check_range("min_steps", self.min_steps, 0)
+        check_range("threads", self.threads, 1, 256)
+        check_range("noise_std", self.noise_std, 0.0, 1.0)
+        check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
+        check_range("gamma", self.gamma, 0.0, 1.0)
+        check_range("tau", self.tau, 0.0, 1.0, low_open=True)
         if self.min_steps > self.max_steps:
             raise ValueError(
                 f"min_steps must be <= max_steps ({self.max_steps}), got {self.min_steps!r}"

@@ -95,6 +95,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from lonlib.validation import check_choice, check_field_types, check_range
+
 SENSORS_PER_CART = 10
 SENSOR_MAX = 127.0
 MAX_CARTS = 5
@@ -161,22 +163,12 @@ class PendulumConfig:
     initial_angle: float = math.pi
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.type in ("int", int):
-                if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                    raise ValueError(f"{f.name} must be an integer, got {value!r}")
-            elif f.type in ("float", float):
-                if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
-                    raise ValueError(f"{f.name} must be a number, got {value!r}")
-                if not math.isfinite(value):
-                    raise ValueError(f"{f.name} must be finite, got {value!r}")
+        check_field_types(self)
         for name, allowed in _CHOICES.items():
-            if getattr(self, name) not in allowed:
-                raise ValueError(f"{name} must be one of {allowed}, got {getattr(self, name)!r}")
-        _in_range("n_carts", self.n_carts, 1, MAX_CARTS)
-        _in_range("substeps", self.substeps, 1, 1000)
-        _in_range("steps", self.steps, 1, STEP_CAP)
+            check_choice(name, getattr(self, name), allowed)
+        check_range("n_carts", self.n_carts, 1, MAX_CARTS)
+        check_range("substeps", self.substeps, 1, 1000)
+        check_range("steps", self.steps, 1, STEP_CAP)
         for name in (
             "gravity",
             "cart_mass",
@@ -191,11 +183,9 @@ class PendulumConfig:
             "velocity_range",
             "angular_velocity_range",
         ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+            check_range(name, getattr(self, name), 0.0, low_open=True)
         for name in ("cart_friction", "hinge_friction", "track_half_length_per_cart"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+            check_range(name, getattr(self, name), 0.0)
         if not 0 < self.upright_angle <= math.pi:
             raise ValueError(f"upright_angle must be in (0, pi], got {self.upright_angle!r}")
         if self.termination_penalty > 0:
@@ -244,11 +234,6 @@ class PendulumConfig:
         """Cart centres at rest, evenly spaced about 0 [m], shape ``[n]``."""
         offsets = np.arange(self.n_carts) - (self.n_carts - 1) / 2
         return offsets * self.initial_spacing
-
-
-def _in_range(name: str, value: int, low: int, high: int) -> None:
-    if not low <= value <= high:
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value!r}")
 
 
 def actions_to_actuators(actions: FloatArray) -> tuple[FloatArray, FloatArray]:

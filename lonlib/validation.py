@@ -1,0 +1,49 @@
+"""Field checks shared by the frozen configuration dataclasses.
+
+Every message names the field and what is allowed, so bad input fails before any compute.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields
+from typing import Any
+
+import numpy as np
+
+
+def check_field_types(config: Any) -> None:
+    """Integers must be integers (not bools), numbers must be finite numbers."""
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if f.type in ("int", int):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValueError(f"{f.name} must be an integer, got {value!r}")
+        elif f.type in ("float", float):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise ValueError(f"{f.name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"{f.name} must be finite, got {value!r}")
+
+
+def check_range(
+    name: str,
+    value: float,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+) -> None:
+    """``low <= value <= high`` (``low < value`` when ``low_open``); either bound optional."""
+    too_low = low is not None and (value <= low if low_open else value < low)
+    too_high = high is not None and value > high
+    if too_low or too_high:
+        left = "(" if low_open else "["
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+
+
+def check_choice(name: str, value: Any, allowed: tuple) -> None:
+    """``value`` must be one of ``allowed``."""
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
