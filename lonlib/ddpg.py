@@ -336,10 +336,13 @@ def _update(
     critic_loss.sum().backward()
     critic_opt.step()
 
+    # The actor's loss needs the critic's input gradient only, not its weight gradients.
+    critic.requires_grad_(False)
     actor_loss = -critic(torch.cat([obs, actor(obs)], dim=2)).mean(dim=(1, 2))
     actor_opt.zero_grad(set_to_none=True)
     actor_loss.sum().backward()
     actor_opt.step()
+    critic.requires_grad_(True)
 
     with torch.no_grad():
         for net, target_net in ((actor, actor_target), (critic, critic_target)):
