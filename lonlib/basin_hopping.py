@@ -1,0 +1,154 @@
+"""Parameter-level basin hopping (paper Algorithm 2) with a pluggable local search.
+
+Like :func:`scipy.optimize.basinhopping`, the global search only perturbs and accepts; the
+local search is any callable ``F(theta, omega, seed) -> LocalOptimum`` (by default DDPG via
+:func:`ddpg_local_search`, a fast deterministic stand-in in the tests). Algorithm 2 as
+written: start from random parameters, run ``F``; then repeatedly add U[-p, p] to **every**
+Actor and Critic parameter of the incumbent, run ``F`` again and accept when ``f >= f*``
+(equal fitness is accepted); the failure counter resets on acceptance and the run ends after
+``tolerance`` consecutive failures, or after ``max_local_searches`` (so that a run always
+ends). Every local search is recorded as a :class:`Trial`, accepted or not, with its parent.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from lonlib.validation import check_field_types, check_range
+
+
+@dataclass(frozen=True)
+class BasinHoppingConfig:
+    """Algorithm 2's inputs: perturbation strength ``p``, tolerance ``T``, a budget."""
+
+    perturbation: float = 1e-4
+    tolerance: int = 5
+    max_local_searches: int = 100
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        check_range("perturbation", self.perturbation, 0.0, 10.0, low_open=True)
+        check_range("tolerance", self.tolerance, 1, 10_000)
+        check_range("max_local_searches", self.max_local_searches, 1, 1_000_000)
+
+
+@dataclass(frozen=True)
+class LocalOptimum:
+    """What a local search returns: fitness and the parameters reached."""
+
+    fitness: float
+    theta: np.ndarray
+    omega: np.ndarray
+    env_steps: int = 0
+
+
+LocalSearch = Callable[[np.ndarray, np.ndarray, int], LocalOptimum]
+"""``F(theta, omega, seed)``: environment and hyperparameters are bound in the callable."""
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One local search of a run. ``parent`` is the index of the incumbent it was perturbed
+    from (-1 for the first, which starts from random parameters)."""
+
+    index: int
+    parent: int
+    fitness: float
+    accepted: bool
+    seconds: float
+    env_steps: int
+
+
+@dataclass
+class RunState:
+    """Where a run stands; enough to resume it after its last finished local search."""
+
+    trials: list[Trial]
+    incumbent: LocalOptimum | None
+    incumbent_index: int
+    failures: int
+    end_reason: str | None = None  # "tolerance" or "budget" once the run has ended
+
+    @property
+    def finished(self) -> bool:
+        """True once the run has met its tolerance or its budget."""
+        return self.end_reason is not None
+
+
+def perturb(values: np.ndarray, strength: float, rng: np.random.Generator) -> np.ndarray:
+    """Add U[-p, p] independently to every parameter (float32 in, float32 out)."""
+    noise = rng.uniform(-strength, strength, size=values.shape)
+    return (values.astype(np.float64) + noise).astype(np.float32)
+
+
+def trial_seed(run_seed: int, index: int) -> int:
+    """Seed of local search ``index`` of a run: a pure function of the run's seed."""
+    return int(np.random.SeedSequence([run_seed, index]).generate_state(1)[0])
+
+
+def basin_hopping_steps(
+    local_search: LocalSearch,
+    initial: tuple[np.ndarray, np.ndarray],
+    config: BasinHoppingConfig,
+    run_seed: int,
+    state: RunState | None = None,
+) -> Iterator[tuple[RunState, Trial, LocalOptimum]]:
+    """Run Algorithm 2 one local search at a time, yielding after each.
+
+    ``initial`` holds the random starting Actor and Critic. The perturbation of trial ``i``
+    and the local search's seed derive only from ``(run_seed, i)``, so a run resumed from a
+    stored ``state`` continues exactly as an uninterrupted one would. The caller stores each
+    yielded trial before asking for the next.
+    """
+    state = state or RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
+    while not state.finished:
+        index = len(state.trials)
+        seed = trial_seed(run_seed, index)
+        if state.incumbent is None:
+            theta, omega, parent = initial[0], initial[1], -1
+        else:
+            rng = np.random.default_rng(seed)
+            theta = perturb(state.incumbent.theta, config.perturbation, rng)
+            omega = perturb(state.incumbent.omega, config.perturbation, rng)
+            parent = state.incumbent_index
+        start = time.perf_counter()
+        optimum = local_search(theta, omega, seed)
+        seconds = time.perf_counter() - start
+        accepted = state.incumbent is None or optimum.fitness >= state.incumbent.fitness
+        trial = Trial(index, parent, float(optimum.fitness), accepted, seconds, optimum.env_steps)
+        state.trials.append(trial)
+        if accepted:
+            state.incumbent, state.incumbent_index, state.failures = optimum, index, 0
+        else:
+            state.failures += 1
+        if state.failures >= config.tolerance:
+            state.end_reason = "tolerance"
+        elif len(state.trials) >= config.max_local_searches:
+            state.end_reason = "budget"
+        yield state, trial, optimum
+
+
+def basin_hopping(
+    local_search: LocalSearch,
+    initial: tuple[np.ndarray, np.ndarray],
+    config: BasinHoppingConfig,
+    run_seed: int,
+) -> RunState:
+    """Run Algorithm 2 to its end and return the finished state (all trials, the best)."""
+    *_, (state, _, _) = basin_hopping_steps(local_search, initial, config, run_seed)
+    return state
+
+
+def ddpg_local_search(env_config, hp) -> LocalSearch:
+    """The paper's ``F``: the DDPG local search bound to an environment and ``h``."""
+    from lonlib.ddpg import local_search
+
+    def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
+        result = local_search(theta, omega, env_config, hp, seed)
+        return LocalOptimum(result.fitness, result.theta, result.omega, result.env_steps)
+
+    return search

@@ -1,0 +1,108 @@
+"""Algorithm 2 semantics with a fast deterministic stand-in for DDPG."""
+
+import numpy as np
+import pytest
+
+from lonlib.basin_hopping import (
+    BasinHoppingConfig,
+    LocalOptimum,
+    RunState,
+    basin_hopping,
+    basin_hopping_steps,
+    ddpg_local_search,
+    trial_seed,
+)
+from lonlib.ddpg import DDPGConfig
+from lonlib.nets import actor_spec, critic_spec
+from lonlib.pendulum import PendulumConfig
+
+START = (np.zeros(6, dtype=np.float32), np.zeros(4, dtype=np.float32))
+
+
+def scripted(fitnesses):
+    """A local search returning the given fitness sequence and recording its inputs."""
+    calls = []
+
+    def search(theta, omega, seed):
+        calls.append((theta.copy(), omega.copy(), seed))
+        f = fitnesses[len(calls) - 1]
+        return LocalOptimum(f, theta + len(calls), omega - len(calls), env_steps=10)
+
+    return search, calls
+
+
+def test_equal_fitness_is_accepted_and_counter_resets():
+    search, _ = scripted([0.3, 0.2, 0.3, 0.1, 0.1, 0.5, 0.0, 0.0])
+    state = basin_hopping(search, START, BasinHoppingConfig(tolerance=2), run_seed=0)
+    assert [t.accepted for t in state.trials] == [True, False, True, False, False]
+    assert state.end_reason == "tolerance"
+    # 0.1, 0.1 after the equal 0.3 were two consecutive failures: exactly T ends the run
+    assert state.incumbent.fitness == 0.3 and state.incumbent_index == 2
+    assert [t.parent for t in state.trials] == [-1, 0, 0, 2, 2]
+
+
+def test_exactly_tolerance_failures_end_a_run():
+    search, calls = scripted([0.5] + [0.1] * 10)
+    state = basin_hopping(search, START, BasinHoppingConfig(tolerance=4), run_seed=0)
+    assert len(calls) == 5 and state.end_reason == "tolerance"
+
+
+def test_budget_ends_a_run_with_its_reason():
+    search, calls = scripted([0.1 * i for i in range(20)])  # always improving
+    config = BasinHoppingConfig(tolerance=3, max_local_searches=7)
+    state = basin_hopping(search, START, config, run_seed=0)
+    assert len(calls) == 7 and state.end_reason == "budget"
+    assert all(t.accepted for t in state.trials)
+
+
+def test_perturbation_touches_every_parameter_within_p():
+    search, calls = scripted([0.5, 0.4, 0.4, 0.4])
+    p = 1e-3
+    basin_hopping(search, START, BasinHoppingConfig(perturbation=p, tolerance=3), run_seed=1)
+    incumbent_theta, incumbent_omega = START[0] + 1, START[1] - 1  # first optimum
+    for theta, omega, _ in calls[1:]:
+        for new, old in ((theta, incumbent_theta), (omega, incumbent_omega)):
+            delta = new.astype(np.float64) - old
+            assert (np.abs(delta) <= p * (1 + 1e-3)).all()
+            assert (delta != 0).all()  # every parameter moved
+
+
+def test_resuming_from_a_stored_state_continues_identically():
+    fit = [0.2, 0.1, 0.3, 0.3, 0.1, 0.1, 0.1]
+    by_seed = {trial_seed(9, i): f for i, f in enumerate(fit)}
+
+    def pure(theta, omega, seed):  # a function of its inputs only, like a seeded DDPG
+        return LocalOptimum(by_seed[seed], theta + 1, omega - 1)
+
+    config = BasinHoppingConfig(tolerance=3)
+    full = basin_hopping(pure, START, config, run_seed=9)
+    steps = basin_hopping_steps(pure, START, config, run_seed=9)
+    for _ in range(3):
+        state, _, _ = next(steps)
+    stored = RunState(list(state.trials), state.incumbent, state.incumbent_index, state.failures)
+    resumed = list(basin_hopping_steps(pure, START, config, 9, state=stored))[-1][0]
+    strip = lambda trials: [(t.index, t.parent, t.fitness, t.accepted) for t in trials]  # noqa: E731
+    assert strip(resumed.trials) == strip(full.trials)
+    assert resumed.end_reason == full.end_reason == "tolerance"
+    np.testing.assert_array_equal(resumed.incumbent.theta, full.incumbent.theta)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("perturbation", 0.0), ("perturbation", -1e-4), ("tolerance", 0), ("max_local_searches", 0)],
+)
+def test_bad_configuration_is_refused_by_name(field, value):
+    with pytest.raises(ValueError, match=field):
+        BasinHoppingConfig(**{field: value})
+
+
+def test_ddpg_is_the_default_local_search():
+    env = PendulumConfig(n_carts=1, steps=40)
+    hp = DDPGConfig(batch_size=32, buffer_size=500, warmup_steps=50, max_steps=120,
+                    min_steps=0, patience_steps=10**6)  # fmt: skip
+    rng = np.random.default_rng(0)
+    start = (actor_spec(1).initial(rng), critic_spec(1).initial(rng))
+    config = BasinHoppingConfig(tolerance=1, max_local_searches=3)
+    state = basin_hopping(ddpg_local_search(env, hp), start, config, run_seed=0)
+    assert 1 < len(state.trials) <= 3
+    assert state.incumbent.theta.shape == (actor_spec(1).n_params,)
