@@ -38,8 +38,8 @@ def check_range(
     too_high = high is not None and value > high
     if too_low or too_high:
         left = "(" if low_open else "["
-        lo = "-inf" if low is None else f"{low:g}"
-        hi = "inf" if high is None else f"{high:g}"
+        lo = "-inf" if low is None else _number(low)
+        hi = "inf" if high is None else _number(high)
         raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
 
 
@@ -47,3 +47,7 @@ def check_choice(name: str, value: Any, allowed: tuple) -> None:
     """``value`` must be one of ``allowed``."""
     if value not in allowed:
         raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def _number(value: float) -> str:
+    return str(int(value)) if float(value).is_integer() and abs(value) < 1e15 else f"{value:g}"

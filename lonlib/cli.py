@@ -1,0 +1,100 @@
+"""The ``lonlib`` command: run experiments, see their status, build and export their LONs."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from lonlib.store import CorruptDataError, p_label
+
+
+def _run(args: argparse.Namespace) -> None:
+    from lonlib.experiment import load_config, run_experiment
+
+    config = load_config(args.config)
+    changes = {}
+    if args.p:
+        changes["perturbations"] = tuple(args.p)
+    if args.runs is not None:
+        changes["runs"] = args.runs
+    if changes:
+        config = dataclasses.replace(config, **changes)  # validated again on construction
+    out = Path(args.out) if args.out else Path("data") / config.name
+    trials = run_experiment(config, out, workers=args.workers, scheduler=args.scheduler,
+                            progress=not args.quiet)  # fmt: skip
+    print(f"{len(trials)} local searches stored under {out}")
+
+
+def _status(args: argparse.Namespace) -> None:
+    from lonlib.experiment import status
+
+    print(status(args.dir).to_string(index=False))
+
+
+def _lon(args: argparse.Namespace) -> None:
+    from lonlib.lon import build_lon, cmlon, metrics_table, to_graphml, to_trace
+    from lonlib.store import read_experiment_trials
+
+    root = Path(args.dir)
+    trials = read_experiment_trials(root)
+    if trials.empty:
+        raise SystemExit(f"lonlib: no stored trials under {root}")
+    table = metrics_table(trials, "max", args.tolerance)
+    with pd.option_context("display.width", 200, "display.max_columns", 30):
+        print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    out = Path(args.out) if args.out else root / "lon"
+    out.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out / "metrics.csv", index=False)
+    for p, group in trials.groupby("p"):
+        graph = build_lon(group, "max", args.tolerance, full=args.full)
+        stem = f"lon_p={p_label(p)}" + ("_full" if args.full else "")
+        to_graphml(graph, out / f"{stem}.graphml")
+        to_trace(graph, out / f"{stem}.trace")
+        to_graphml(cmlon(graph), out / f"cmlon_p={p_label(p)}.graphml")
+    print(f"metrics, GraphML and trace files written to {out}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``lonlib`` (also used for ``--help``)."""
+    parser = argparse.ArgumentParser(prog="lonlib", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="run (or resume) an experiment")
+    run.add_argument("config", help="'quick', 'paper' or a YAML file")
+    run.add_argument("--p", type=float, nargs="+", help="perturbation strengths (override)")
+    run.add_argument("--runs", type=int, help="runs per p (override)")
+    run.add_argument("--workers", type=int, default=1, help="local worker processes")
+    run.add_argument("--scheduler", help="Dask scheduler address, or 'dask-local'")
+    run.add_argument("--out", help="output folder (default data/<name>)")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.set_defaults(func=_run)
+
+    stat = sub.add_parser("status", help="what is finished, started and left")
+    stat.add_argument("dir")
+    stat.set_defaults(func=_status)
+
+    lon = sub.add_parser("lon", help="print LON metrics per p and write exports")
+    lon.add_argument("dir")
+    lon.add_argument("--full", action="store_true", help="add rejected trials (worsening)")
+    lon.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality tolerance")
+    lon.add_argument("--out", help="export folder (default DIR/lon)")
+    lon.set_defaults(func=_lon)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``lonlib`` command."""
+    args = build_parser().parse_args(argv)
+    try:
+        args.func(args)
+    except (ValueError, CorruptDataError) as error:
+        print(f"lonlib: error: {error}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+if __name__ == "__main__":
+    main()

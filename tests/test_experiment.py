@@ -1,0 +1,164 @@
+"""Experiments: storage, resume after SIGKILL, executors agree, corrupt files, bad input."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from lonlib.cli import main as cli_main
+from lonlib.experiment import (
+    ExperimentConfig,
+    load_config,
+    named_config,
+    run_experiment,
+    status,
+)
+from lonlib.store import CorruptDataError, optimum_path, read_optimum, trials_path
+
+TINY = """
+name: tiny
+perturbations: [1.0e-3, 1.0e-4]
+runs: 2
+tolerance: 2
+max_local_searches: 4
+env: {n_carts: 1, steps: 40, upright_angle: 2.9, motor: acceleration, motor_gain: 2.0}
+ddpg: {batch_size: 32, buffer_size: 500, warmup_steps: 50, max_steps: MAX, min_steps: 0,
+       patience_steps: 1000}
+"""
+COMPARED = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps"]
+
+
+def tiny_yaml(folder: Path, max_steps: int = 150) -> Path:
+    path = folder / "tiny.yaml"
+    path.write_text(TINY.replace("MAX", str(max_steps)))
+    return path
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("reference")
+    config = load_config(tiny_yaml(folder))
+    trials = run_experiment(config, folder / "out", progress=False)
+    return config, folder / "out", trials
+
+
+def test_serial_run_stores_trials_optima_and_manifest(reference):
+    config, out, trials = reference
+    assert set(trials["p"]) == {1e-3, 1e-4} and set(trials["run"]) == {0, 1}
+    assert trials["fitness"].nunique() > 1  # the tiny task is not a flat zero
+    for row in trials[trials["accepted"]].itertuples():
+        optimum = read_optimum(optimum_path(out, row.p, row.run, row.index))
+        assert optimum.fitness == row.fitness
+        assert optimum.theta.dtype.name == "float32"
+    manifest = (out / "manifest.json").read_text()
+    for key in ("git_commit", "versions", "torch", "created", "lonlib_version"):
+        assert key in manifest
+    table = status(out)
+    assert list(table["finished"]) == [2, 2] and list(table["not_started"]) == [0, 0]
+
+
+def test_rerun_resumes_and_redoes_nothing(reference):
+    config, out, trials = reference
+    stamps = {p: p.stat().st_mtime_ns for p in out.rglob("*.parquet")}
+    again = run_experiment(config, out, progress=False)
+    pd.testing.assert_frame_equal(again[COMPARED], trials[COMPARED])
+    assert stamps == {p: p.stat().st_mtime_ns for p in out.rglob("*.parquet")}
+
+
+@pytest.mark.parametrize(("workers", "scheduler"), [(2, None), (2, "dask-local")])
+def test_process_pool_and_dask_give_identical_trials(reference, tmp_path, workers, scheduler):
+    config, _, trials = reference
+    other = run_experiment(config, tmp_path / "out", workers=workers, scheduler=scheduler,
+                           progress=False)  # fmt: skip
+    pd.testing.assert_frame_equal(other[COMPARED], trials[COMPARED])
+
+
+def test_sigkill_then_resume_gives_the_uninterrupted_trials(tmp_path):
+    yaml_path = tiny_yaml(tmp_path, max_steps=300)
+    config = load_config(yaml_path)
+    expected = run_experiment(config, tmp_path / "reference", progress=False)
+    out = tmp_path / "killed"
+    command = [sys.executable, "-m", "lonlib", "run", str(yaml_path), "--out", str(out),
+               "--quiet"]  # fmt: skip
+    process = subprocess.Popen(command, start_new_session=True)
+    first = trials_path(out, 1e-3, 0)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if first.exists() and len(pd.read_parquet(first)) >= 2:
+            break
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    partial = pd.read_parquet(first)
+    assert len(partial) >= 2 and len(expected) > len(partial)
+    resumed = run_experiment(config, out, progress=False)
+    pd.testing.assert_frame_equal(resumed[COMPARED], expected[COMPARED])
+    assert not list(out.rglob("*.tmp"))
+
+
+def test_corrupt_file_is_named_and_nothing_else_is_touched(reference, tmp_path):
+    config, out, _ = reference
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-r", str(out), str(copy)], check=True)
+    damaged = trials_path(copy, 1e-4, 1)
+    damaged.write_bytes(damaged.read_bytes()[:40])
+    before = {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+    with pytest.raises(CorruptDataError, match=str(damaged)):
+        run_experiment(config, copy, progress=False)
+    with pytest.raises(CorruptDataError, match="run_0001"):
+        status(copy)
+    assert before == {p: p.read_bytes() for p in copy.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize(
+    ("yaml_text", "message"),
+    [
+        ("perturbations: [0.0]", "perturbations"),
+        ("perturbations: [-1.0e-3]", "perturbations"),
+        ("runs: 0", "runs"),
+        ("tolerance: 0", "tolerance"),
+        ("colour: red", "colour"),
+        ("env: {n_carts: 7}", "n_carts"),
+        ("env: {n_cart: 2}", "n_cart"),
+        ("ddpg: {batch_size: 0}", "batch_size"),
+        ("ddpg: {lr: 0.1}", "lr"),
+        ("perturbations: [abc]", "perturbations"),
+    ],
+)
+def test_bad_configuration_is_refused_before_any_compute(tmp_path, yaml_text, message):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml_text)
+    with pytest.raises(ValueError, match=message):
+        load_config(path)
+
+
+def test_folder_with_another_experiment_is_refused(reference, tmp_path):
+    config, out, _ = reference
+    other = ExperimentConfig.from_mapping({**config.to_dict(), "seed": 7})
+    with pytest.raises(ValueError, match="seed"):
+        run_experiment(other, out, progress=False)
+
+
+def test_named_configurations():
+    quick, paper = named_config("quick"), named_config("paper")
+    assert quick.perturbations == paper.perturbations == (1e-3, 1e-4)
+    assert paper.runs == 100 and paper.tolerance == 5 and paper.env.steps == 2000
+    assert quick.ddpg.max_steps < paper.ddpg.max_steps and "not the paper" in quick.note
+    with pytest.raises(ValueError, match="nonsense"):
+        load_config("nonsense")
+
+
+def test_cli_lon_prints_metrics_and_writes_exports(reference, tmp_path, capsys):
+    _, out, _ = reference
+    cli_main(["lon", str(out), "--full", "--out", str(tmp_path / "lon")])
+    printed = capsys.readouterr().out
+    assert "global_sinks" in printed and "funnels" in printed
+    names = {p.name for p in (tmp_path / "lon").iterdir()}
+    assert {"metrics.csv", "lon_p=0.0001_full.trace", "lon_p=0.001_full.graphml"} <= names
+    with pytest.raises(SystemExit):
+        cli_main(["run", "quick", "--p", "0"])
