@@ -5,12 +5,20 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 TORCH  := torch==2.13.0
 
-.PHONY: help setup test bench lab lint format clean
+CONFIG    ?= quick
+WORKERS   ?= 2
+SCHEDULER ?=
+OUT       ?= data/$(basename $(notdir $(CONFIG)))
+PAPERMILL := $(BIN)/papermill --log-level WARNING --no-progress-bar
+
+.PHONY: help setup test bench lab lint format clean reproduce
 
 help:
 	@echo "make setup   create $(VENV) and install lonlib with its dev extra (idempotent)"
 	@echo "make test    set up, then run the test suite"
 	@echo "make bench   set up, then run the benchmarks (writes benchmarks/results/*.json)"
+	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
+	@echo "             sample the LON for every p, analyse it and record optima (resumes)"
 	@echo "make lab     set up, then start JupyterLab in the project's environment"
 	@echo "make lint    ruff check + ruff format --check"
 	@echo "make clean   remove $(VENV) and caches (never data/)"
@@ -52,6 +60,30 @@ $(VENV)/.lab-installed: $(STAMP)
 
 lab: $(VENV)/.lab-installed
 	$(BIN)/jupyter lab --no-browser $$( [ "$$(id -u)" = 0 ] && echo --allow-root ) notebooks
+
+# Sampling, analysis and recordings through the notebooks (executed copies are kept).
+reproduce: setup
+	@mkdir -p $(OUT)/notebooks
+	@start=$$(date +%s); \
+	for p in $$($(BIN)/python -c "from lonlib.experiment import load_config; \
+	    print(*load_config('$(CONFIG)').perturbations)"); do \
+	  echo "== sampling p=$$p ($(CONFIG), $(WORKERS) workers$(if $(SCHEDULER), on $(SCHEDULER)))"; \
+	  $(PAPERMILL) notebooks/sample_lon.ipynb $(OUT)/notebooks/sample_lon_p=$$p.ipynb \
+	    -r config "$(CONFIG)" -p p $$p -p workers $(WORKERS) -r scheduler "$(SCHEDULER)" \
+	    -r out "$(OUT)" || exit 1; \
+	done; \
+	echo "== analysis"; \
+	$(PAPERMILL) notebooks/analyse_lon.ipynb $(OUT)/notebooks/analyse_lon.ipynb \
+	  -r experiment_dir "$(OUT)" || exit 1; \
+	echo "== recordings"; \
+	$(PAPERMILL) notebooks/record_optima.ipynb $(OUT)/notebooks/record_optima.ipynb \
+	  -r experiment_dir "$(OUT)" -p show_inline_viewer False || exit 1; \
+	$(BIN)/lonlib status $(OUT); \
+	echo "\nDone in $$(( $$(date +%s) - start )) s. Results under $(OUT)/:"; \
+	echo "  figures/      Fig. 2 boxplot, Fig. 3 3-D LON (.png, .html), Figs. 4-5 histograms,"; \
+	echo "                metrics.csv (LON metrics per p), peaks.csv (peaks beside the paper's)"; \
+	echo "  recordings/   rerun .rrd files: view with  $(BIN)/rerun $(OUT)/recordings/<file>.rrd"; \
+	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info

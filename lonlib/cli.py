@@ -24,8 +24,9 @@ def _run(args: argparse.Namespace) -> None:
     if changes:
         config = dataclasses.replace(config, **changes)  # validated again on construction
     out = Path(args.out) if args.out else Path("data") / config.name
-    trials = run_experiment(config, out, workers=args.workers, scheduler=args.scheduler,
-                            progress=not args.quiet)  # fmt: skip
+    trials = run_experiment(
+        config, out, workers=args.workers, scheduler=args.scheduler, progress=not args.quiet
+    )
     print(f"{len(trials)} local searches stored under {out}")
 
 

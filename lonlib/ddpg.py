@@ -38,7 +38,12 @@ from lonlib.validation import check_field_types, check_range
 @dataclass(frozen=True)
 class DDPGConfig:
     """DDPG hyperparameters (the paper's ``h``). Paper values: buffer, batch, noise, lr,
-    gamma. Ours: tau, the warm-up and the step budget (README, "DDPG local search")."""
+    gamma. Ours: tau, the warm-up and the step budget (README, "DDPG local search").
+
+    ``plateau_tiebreak``: when the greedy fitness ties the best so far, a higher greedy
+    reward return counts as progress (it keeps the parameters and resets the patience), so
+    a search on a zero-fitness plateau is judged by whether it is still getting closer.
+    """
 
     buffer_size: int = 40_000
     batch_size: int = 2000
@@ -51,6 +56,7 @@ class DDPGConfig:
     min_steps: int = 60_000
     patience_steps: int = 40_000
     eval_seed: int = 0
+    plateau_tiebreak: bool = False
     device: str = "cpu"
     threads: int = 1
 
@@ -83,6 +89,7 @@ class EpisodeRecord:
     episode_return: float
     episode_length: int
     greedy_fitness: float
+    greedy_return: float  # the greedy episode's reward sum (the plateau tie-breaker)
     critic_loss: float  # mean over the episode's updates (nan before the warm-up ends)
     actor_loss: float
     seconds: float  # since the local search started
@@ -160,11 +167,20 @@ def local_search_batch(
     critic_opt = torch.optim.Adam(critic.parameters(), **adam)
     replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, device)
 
-    def greedy_fitness(flat_theta: np.ndarray) -> float:
+    def greedy(flat_theta: np.ndarray) -> tuple[float, float]:
+        """Greedy (noise-free) fitness and reward return of one Actor."""
         policy = lambda obs: forward_numpy(a_spec, flat_theta, obs)  # noqa: E731
-        return float(evaluate(policy, env_config, 1, hp.eval_seed).fitness[0])
+        result = evaluate(policy, env_config, 1, hp.eval_seed)
+        return float(result.fitness[0]), float(result.episode_return[0])
 
-    best = [greedy_fitness(thetas[i]) for i in range(k)]
+    def better(candidate: tuple[float, float], incumbent: tuple[float, float]) -> bool:
+        """Higher fitness; with ``plateau_tiebreak``, equal fitness and a higher return."""
+        if candidate[0] != incumbent[0] or not hp.plateau_tiebreak:
+            return candidate[0] > incumbent[0]
+        return candidate[1] > incumbent[1] + 1e-9
+
+    scores = [greedy(thetas[i]) for i in range(k)]
+    best = [score[0] for score in scores]
     results = [
         LocalSearchResult(
             fitness=best[i],
@@ -208,9 +224,15 @@ def local_search_batch(
         if step >= hp.warmup_steps:
             indices = np.stack([rng.integers(0, replay.size, hp.batch_size) for rng in rngs])
             critic_loss, actor_loss = _update(
-                replay.sample(indices), actor, critic, actor_target, critic_target,
-                actor_opt, critic_opt, hp,
-            )  # fmt: skip
+                replay.sample(indices),
+                actor,
+                critic,
+                actor_target,
+                critic_target,
+                actor_opt,
+                critic_opt,
+                hp,
+            )
             for i in np.flatnonzero(active):
                 losses[i].append((critic_loss[i], actor_loss[i]))
         # 4. episode ends: greedy fitness, best parameters, reset
@@ -219,8 +241,10 @@ def local_search_batch(
             flat_actor = actor.flat()
             flat_critic = critic.flat() if (ended & active).any() else None
             for i in np.flatnonzero(ended & active):
-                fitness = greedy_fitness(flat_actor[i])
-                if fitness > results[i].fitness:
+                score = greedy(flat_actor[i])
+                fitness = score[0]
+                if better(score, scores[i]):
+                    scores[i] = score
                     results[i].fitness = fitness
                     results[i].theta = flat_actor[i].copy()
                     results[i].omega = flat_critic[i].copy()
@@ -233,6 +257,7 @@ def local_search_batch(
                         episode_return=float(episode_return[i]),
                         episode_length=int(sim.step_count[i]),
                         greedy_fitness=fitness,
+                        greedy_return=score[1],
                         critic_loss=float(np.mean(episode_losses[:, 0])),
                         actor_loss=float(np.mean(episode_losses[:, 1])),
                         seconds=time.perf_counter() - start_time,
@@ -283,8 +308,9 @@ class ReplayBuffer:
     All agents step together, so one write position and one size serve every agent.
     """
 
-    def __init__(self, agents: int, capacity: int, obs_size: int, act_size: int,
-                 device: torch.device) -> None:  # fmt: skip
+    def __init__(
+        self, agents: int, capacity: int, obs_size: int, act_size: int, device: torch.device
+    ) -> None:
         def zeros(*shape: int) -> torch.Tensor:
             return torch.zeros(agents, capacity, *shape, device=device)
 
@@ -294,8 +320,14 @@ class ReplayBuffer:
         self.device = device
         self._agents = torch.arange(agents, device=device)[:, None]
 
-    def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
-            next_obs: np.ndarray, terminated: np.ndarray) -> None:  # fmt: skip
+    def add(
+        self,
+        obs: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        next_obs: np.ndarray,
+        terminated: np.ndarray,
+    ) -> None:
         """Store one transition per agent (arrays with a leading agent dimension)."""
         p = self.position
         self.obs[:, p] = torch.as_tensor(obs)
@@ -310,8 +342,13 @@ class ReplayBuffer:
         """Transitions at ``indices [k, batch]`` (agent ``i`` reads only its own buffer)."""
         idx = torch.as_tensor(indices, device=self.device)
         a = self._agents
-        return (self.obs[a, idx], self.actions[a, idx], self.rewards[a, idx],
-                self.next_obs[a, idx], self.not_done[a, idx])  # fmt: skip
+        return (
+            self.obs[a, idx],
+            self.actions[a, idx],
+            self.rewards[a, idx],
+            self.next_obs[a, idx],
+            self.not_done[a, idx],
+        )
 
 
 def _update(

@@ -105,8 +105,9 @@ class ExperimentConfig:
         env = {**start.pop("env"), **(values.pop("env", None) or {})}
         ddpg = {**start.pop("ddpg"), **(values.pop("ddpg", None) or {})}
         merged = {**start, **values}
-        merged["perturbations"] = tuple(_as_float("perturbations", p)
-                                        for p in merged["perturbations"])  # fmt: skip
+        merged["perturbations"] = tuple(
+            _as_float("perturbations", p) for p in merged["perturbations"]
+        )
         unknown_ddpg = sorted(set(ddpg) - {f.name for f in dataclasses.fields(DDPGConfig)})
         if unknown_ddpg:
             raise ValueError(f"unknown ddpg key(s) {unknown_ddpg}")
@@ -134,9 +135,13 @@ def _as_float(name: str, value: Any) -> float:
 
 
 QUICK_DDPG = DDPGConfig(
-    batch_size=256, buffer_size=20_000, warmup_steps=1000, max_steps=6000, min_steps=3000,
+    batch_size=256,
+    buffer_size=20_000,
+    warmup_steps=1000,
+    max_steps=6000,
+    min_steps=3000,
     patience_steps=3000,
-)  # fmt: skip
+)
 
 
 def named_config(name: str) -> ExperimentConfig:
@@ -219,9 +224,13 @@ def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> di
 def _git_commit() -> str | None:
     try:
         return subprocess.run(
-            ["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
-            cwd=Path(__file__).parent, timeout=5,
-        ).stdout.strip()  # fmt: skip
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).parent,
+            timeout=5,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return None
 
@@ -256,8 +265,9 @@ def updated_manifest(config: ExperimentConfig, out: Path) -> dict[str, Any]:
         perturbations = tuple(dict.fromkeys((*stored.perturbations, *config.perturbations)))
         merged = dataclasses.replace(stored, runs=runs, perturbations=perturbations)
         manifest["config"] = merged.to_dict()
-        manifest.setdefault("sessions", []).append({"started": now, "versions": _versions(),
-                                                    "git_commit": _git_commit()})  # fmt: skip
+        manifest.setdefault("sessions", []).append(
+            {"started": now, "versions": _versions(), "git_commit": _git_commit()}
+        )
     else:
         manifest = {
             "experiment": config.name,
@@ -306,8 +316,13 @@ def run_experiment(
     todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
     write_json(out / "manifest.json", manifest)
     total = len(config.perturbations) * config.runs
-    bar = tqdm(total=total, initial=total - len(todo), desc=f"{config.name} runs",
-               disable=not progress, unit="run")  # fmt: skip
+    bar = tqdm(
+        total=total,
+        initial=total - len(todo),
+        desc=f"{config.name} runs",
+        disable=not progress,
+        unit="run",
+    )
     try:
         if not todo:
             pass
@@ -365,17 +380,26 @@ def _run_dask(config, out, todo, workers, scheduler, bar, max_attempts) -> None:
 
     cluster = None
     if scheduler == "dask-local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)  # fmt: skip
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        )
         client = Client(cluster)
     else:
         client = Client(scheduler, timeout="30s")
     try:
         futures = [
-            client.submit(run_one, str(out), config, p, run, key=f"{config.name}-{p}-{run}",
-                          retries=max_attempts - 1, pure=False)
+            client.submit(
+                run_one,
+                str(out),
+                config,
+                p,
+                run,
+                key=f"{config.name}-{p}-{run}",
+                retries=max_attempts - 1,
+                pure=False,
+            )
             for p, run in todo
-        ]  # fmt: skip
+        ]
         for future in as_completed(futures):
             future.result()
             _refresh(bar, out, done=1)
@@ -405,7 +429,15 @@ def status(out: str | Path) -> pd.DataFrame:
             started += not state.finished
             if state.incumbent is not None:
                 best = np.fmax(best, state.incumbent.fitness)
-        rows.append({"p": p, "runs": config.runs, "finished": finished, "started": started,
-                     "not_started": config.runs - finished - started,
-                     "local_searches": searches, "best_fitness": best})  # fmt: skip
+        rows.append(
+            {
+                "p": p,
+                "runs": config.runs,
+                "finished": finished,
+                "started": started,
+                "not_started": config.runs - finished - started,
+                "local_searches": searches,
+                "best_fitness": best,
+            }
+        )
     return pd.DataFrame(rows)

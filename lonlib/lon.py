@@ -55,9 +55,11 @@ def _add_edge(graph: nx.DiGraph, source: str, target: str, run: Any) -> None:
         graph.edges[source, target]["weight"] += 1
         return
     kind = edge_type(
-        graph.nodes[source]["fitness"], graph.nodes[target]["fitness"],
-        graph.graph["sense"], graph.graph["tolerance"],
-    )  # fmt: skip
+        graph.nodes[source]["fitness"],
+        graph.nodes[target]["fitness"],
+        graph.graph["sense"],
+        graph.graph["tolerance"],
+    )
     graph.add_edge(source, target, type=kind, weight=1, run=str(run))
 
 
@@ -78,9 +80,14 @@ def build_lon(
             continue
         name = node_id(row.p, row.run, row.index)
         graph.add_node(
-            name, fitness=float(row.fitness), p=float(row.p), run=int(row.run),
-            index=int(row.index), start=row.parent < 0, accepted=bool(row.accepted),
-        )  # fmt: skip
+            name,
+            fitness=float(row.fitness),
+            p=float(row.p),
+            run=int(row.run),
+            index=int(row.index),
+            start=row.parent < 0,
+            accepted=bool(row.accepted),
+        )
         run_key = f"{p_label(row.p)}:{row.run}"
         if row.parent >= 0:
             _add_edge(graph, node_id(row.p, row.run, row.parent), name, run_key)
@@ -198,8 +205,9 @@ def lon_metrics(graph: nx.DiGraph) -> dict[str, float]:
     }
 
 
-def metrics_table(trials: pd.DataFrame, sense: str = "max", tolerance: float = 1e-9
-                  ) -> pd.DataFrame:  # fmt: skip
+def metrics_table(
+    trials: pd.DataFrame, sense: str = "max", tolerance: float = 1e-9
+) -> pd.DataFrame:
     """:func:`lon_metrics` per perturbation strength, one row per p."""
     rows = []
     for p, group in trials.groupby("p", sort=True):
@@ -232,12 +240,14 @@ def from_trace(path: str | Path, sense: str = "min", tolerance: float = 1e-9) ->
     run_ends: dict[str, str] = {}
     for line_no, (run, f1, n1, f2, n2) in rows:
         for name, fitness in ((n1, f1), (n2, f2)):
-            if name in graph and not np.isclose(graph.nodes[name]["fitness"], fitness,
-                                                rtol=0, atol=tolerance):  # fmt: skip
+            if name in graph and not np.isclose(
+                graph.nodes[name]["fitness"], fitness, rtol=0, atol=tolerance
+            ):
                 raise ValueError(f"{path}:{line_no}: node {name} has two fitness values")
             if name not in graph:
-                graph.add_node(name, fitness=fitness, run=run, start=run not in run_ends,
-                               accepted=True)  # fmt: skip
+                graph.add_node(
+                    name, fitness=fitness, run=run, start=run not in run_ends, accepted=True
+                )
         kind = edge_type(f1, f2, sense, tolerance)
         graph.nodes[n2]["accepted"] = graph.nodes[n2]["accepted"] and kind != "worsening"
         _add_edge(graph, n1, n2, run)
@@ -265,8 +275,7 @@ def _read_trace_rows(path: Path) -> Iterable[tuple[int, tuple[str, float, str, f
         if len(parts) != 5:
             raise ValueError(f"{path}:{line_no}: expected 5 fields, got {len(parts)}")
         try:
-            out.append((line_no, (parts[0], float(parts[1]), parts[2], float(parts[3]),
-                                  parts[4])))  # fmt: skip
+            out.append((line_no, (parts[0], float(parts[1]), parts[2], float(parts[3]), parts[4])))
         except ValueError:
             raise ValueError(f"{path}:{line_no}: fitness values must be numbers") from None
     return out

@@ -489,6 +489,7 @@ class Evaluation:
     fitness: FloatArray
     end_reason: np.ndarray
     steps: np.ndarray
+    episode_return: FloatArray  # sum of the config's reward over the episode
 
 
 def evaluate(
@@ -504,8 +505,12 @@ def evaluate(
     ``seed`` draws the initial-state noise (if any). Stops as soon as every environment ended.
     """
     sim = CoupledPendulums(config, batch_size, seed)
+    episode_return = np.zeros(sim.batch_size)
     while not sim.done.all():
-        sim.step(policy(sim.observe()))
+        episode_return += sim.step(policy(sim.observe())).reward
     return Evaluation(
-        fitness=sim.fitness, end_reason=sim.end_reason.copy(), steps=sim.step_count.copy()
+        fitness=sim.fitness,
+        end_reason=sim.end_reason.copy(),
+        steps=sim.step_count.copy(),
+        episode_return=episode_return,
     )

@@ -83,8 +83,9 @@ def optimum_path(root: Path, p: float, run: int, index: int) -> Path:
     return run_dir(root, p, run) / f"optimum_{index:04d}.npz"
 
 
-def save_step(root: Path, p: float, run: int, trials: list[Trial], optimum: LocalOptimum | None
-              ) -> None:  # fmt: skip
+def save_step(
+    root: Path, p: float, run: int, trials: list[Trial], optimum: LocalOptimum | None
+) -> None:
     """Persist one finished local search: its optimum (if accepted), then the trials table."""
     last = trials[-1]
     if optimum is not None and last.accepted:
@@ -107,14 +108,27 @@ def save_step(root: Path, p: float, run: int, trials: list[Trial], optimum: Loca
 def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:
     """Trials as a table with the run's coordinates."""
     rows = [
-        {"p": p, "run": run, "index": t.index, "parent": t.parent, "fitness": t.fitness,
-         "accepted": t.accepted, "seconds": t.seconds, "env_steps": t.env_steps}
+        {
+            "p": p,
+            "run": run,
+            "index": t.index,
+            "parent": t.parent,
+            "fitness": t.fitness,
+            "accepted": t.accepted,
+            "seconds": t.seconds,
+            "env_steps": t.env_steps,
+        }
         for t in trials
-    ]  # fmt: skip
+    ]
     return pd.DataFrame(rows, columns=TRIAL_COLUMNS).astype(
-        {"run": "int64", "index": "int64", "parent": "int64", "env_steps": "int64",
-         "accepted": "bool"}
-    )  # fmt: skip
+        {
+            "run": "int64",
+            "index": "int64",
+            "parent": "int64",
+            "env_steps": "int64",
+            "accepted": "bool",
+        }
+    )
 
 
 def read_trials(path: Path) -> pd.DataFrame:
@@ -140,18 +154,23 @@ def read_optimum(path: Path) -> LocalOptimum:
         raise CorruptDataError(f"{path}: cannot read the stored optimum ({error})") from error
 
 
-def load_run_state(root: Path, p: float, run: int, tolerance: int, budget: int
-                   ) -> RunState | None:  # fmt: skip
+def load_run_state(root: Path, p: float, run: int, tolerance: int, budget: int) -> RunState | None:
     """Rebuild a run's :class:`RunState` from disk (None if it has not started)."""
     path = trials_path(root, p, run)
     if not path.exists():
         return None
     table = read_trials(path)
     trials = [
-        Trial(int(r.index), int(r.parent), float(r.fitness), bool(r.accepted), float(r.seconds),
-              int(r.env_steps))
+        Trial(
+            int(r.index),
+            int(r.parent),
+            float(r.fitness),
+            bool(r.accepted),
+            float(r.seconds),
+            int(r.env_steps),
+        )
         for r in table.itertuples()
-    ]  # fmt: skip
+    ]
     incumbent_index, failures = -1, 0
     for trial in trials:
         if trial.accepted:

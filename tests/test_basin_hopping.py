@@ -98,8 +98,14 @@ def test_bad_configuration_is_refused_by_name(field, value):
 
 def test_ddpg_is_the_default_local_search():
     env = PendulumConfig(n_carts=1, steps=40)
-    hp = DDPGConfig(batch_size=32, buffer_size=500, warmup_steps=50, max_steps=120,
-                    min_steps=0, patience_steps=10**6)  # fmt: skip
+    hp = DDPGConfig(
+        batch_size=32,
+        buffer_size=500,
+        warmup_steps=50,
+        max_steps=120,
+        min_steps=0,
+        patience_steps=10**6,
+    )
     rng = np.random.default_rng(0)
     start = (actor_spec(1).initial(rng), critic_spec(1).initial(rng))
     config = BasinHoppingConfig(tolerance=1, max_local_searches=3)

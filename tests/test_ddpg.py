@@ -95,9 +95,13 @@ def test_ddpg_learns_a_task_with_known_good_behaviour():
         n_carts=1, steps=150, upright_angle=2.5, motor="acceleration", motor_gain=2.0
     )
     hp = DDPGConfig(
-        batch_size=128, buffer_size=10_000, warmup_steps=1000, max_steps=5000,
-        min_steps=0, patience_steps=10**6,
-    )  # fmt: skip
+        batch_size=128,
+        buffer_size=10_000,
+        warmup_steps=1000,
+        max_steps=5000,
+        min_steps=0,
+        patience_steps=10**6,
+    )
     thetas, omegas = initial(1, 3)
     results = local_search_batch(thetas, omegas, env, hp, seeds=[0, 1, 2])
     for result in results:

@@ -5,7 +5,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -19,32 +18,14 @@ from lonlib.experiment import (
     status,
 )
 from lonlib.store import CorruptDataError, optimum_path, read_optimum, trials_path
+from tests.conftest import write_tiny_yaml
 
-TINY = """
-name: tiny
-perturbations: [1.0e-3, 1.0e-4]
-runs: 2
-tolerance: 2
-max_local_searches: 4
-env: {n_carts: 1, steps: 40, upright_angle: 2.9, motor: acceleration, motor_gain: 2.0}
-ddpg: {batch_size: 32, buffer_size: 500, warmup_steps: 50, max_steps: MAX, min_steps: 0,
-       patience_steps: 1000}
-"""
 COMPARED = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps"]
 
 
-def tiny_yaml(folder: Path, max_steps: int = 150) -> Path:
-    path = folder / "tiny.yaml"
-    path.write_text(TINY.replace("MAX", str(max_steps)))
-    return path
-
-
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("reference")
-    config = load_config(tiny_yaml(folder))
-    trials = run_experiment(config, folder / "out", progress=False)
-    return config, folder / "out", trials
+def reference(tiny_experiment):
+    return tiny_experiment
 
 
 def test_serial_run_stores_trials_optima_and_manifest(reference):
@@ -73,18 +54,18 @@ def test_rerun_resumes_and_redoes_nothing(reference):
 @pytest.mark.parametrize(("workers", "scheduler"), [(2, None), (2, "dask-local")])
 def test_process_pool_and_dask_give_identical_trials(reference, tmp_path, workers, scheduler):
     config, _, trials = reference
-    other = run_experiment(config, tmp_path / "out", workers=workers, scheduler=scheduler,
-                           progress=False)  # fmt: skip
+    other = run_experiment(
+        config, tmp_path / "out", workers=workers, scheduler=scheduler, progress=False
+    )
     pd.testing.assert_frame_equal(other[COMPARED], trials[COMPARED])
 
 
 def test_sigkill_then_resume_gives_the_uninterrupted_trials(tmp_path):
-    yaml_path = tiny_yaml(tmp_path, max_steps=300)
+    yaml_path = write_tiny_yaml(tmp_path, max_steps=300)
     config = load_config(yaml_path)
     expected = run_experiment(config, tmp_path / "reference", progress=False)
     out = tmp_path / "killed"
-    command = [sys.executable, "-m", "lonlib", "run", str(yaml_path), "--out", str(out),
-               "--quiet"]  # fmt: skip
+    command = [sys.executable, "-m", "lonlib", "run", str(yaml_path), "--out", str(out), "--quiet"]
     process = subprocess.Popen(command, start_new_session=True)
     first = trials_path(out, 1e-3, 0)
     deadline = time.monotonic() + 120

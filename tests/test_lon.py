@@ -22,29 +22,54 @@ from lonlib.lon import (
 def trials(rows, p=1e-4):
     """rows: (run, index, parent, fitness, accepted)."""
     return pd.DataFrame(
-        [{"p": p, "run": r, "index": i, "parent": par, "fitness": f, "accepted": a,
-          "seconds": 0.0, "env_steps": 0} for r, i, par, f, a in rows]
-    )  # fmt: skip
+        [
+            {
+                "p": p,
+                "run": r,
+                "index": i,
+                "parent": par,
+                "fitness": f,
+                "accepted": a,
+                "seconds": 0.0,
+                "env_steps": 0,
+            }
+            for r, i, par, f, a in rows
+        ]
+    )
 
 
 HAND = trials(
     [
-        (0, 0, -1, 0.2, True), (0, 1, 0, 0.1, False), (0, 2, 0, 0.2, True),
-        (0, 3, 2, 0.5, True), (0, 4, 3, 0.3, False), (0, 5, 3, 0.4, False),
-        (1, 0, -1, 0.5, True), (1, 1, 0, 0.4, False), (1, 2, 0, 0.4, False),
-        (2, 0, -1, 0.1, True), (2, 1, 0, 0.05, False), (2, 2, 0, 0.0, False),
+        (0, 0, -1, 0.2, True),
+        (0, 1, 0, 0.1, False),
+        (0, 2, 0, 0.2, True),
+        (0, 3, 2, 0.5, True),
+        (0, 4, 3, 0.3, False),
+        (0, 5, 3, 0.4, False),
+        (1, 0, -1, 0.5, True),
+        (1, 1, 0, 0.4, False),
+        (1, 2, 0, 0.4, False),
+        (2, 0, -1, 0.1, True),
+        (2, 1, 0, 0.05, False),
+        (2, 2, 0, 0.0, False),
     ]
-)  # fmt: skip
+)
 
 
 def test_paper_lon_of_a_hand_built_sample():
     lon = build_lon(HAND)
-    assert set(lon) == {node_id(1e-4, 0, 0), node_id(1e-4, 0, 2), node_id(1e-4, 0, 3),
-                        node_id(1e-4, 1, 0), node_id(1e-4, 2, 0)}  # fmt: skip
+    assert set(lon) == {
+        node_id(1e-4, 0, 0),
+        node_id(1e-4, 0, 2),
+        node_id(1e-4, 0, 3),
+        node_id(1e-4, 1, 0),
+        node_id(1e-4, 2, 0),
+    }
     assert lon.edges[node_id(1e-4, 0, 0), node_id(1e-4, 0, 2)]["type"] == "equal"
     assert lon.edges[node_id(1e-4, 0, 2), node_id(1e-4, 0, 3)]["type"] == "improving"
-    assert sorted(sinks(lon)) == sorted([node_id(1e-4, 0, 3), node_id(1e-4, 1, 0),
-                                         node_id(1e-4, 2, 0)])  # fmt: skip
+    assert sorted(sinks(lon)) == sorted(
+        [node_id(1e-4, 0, 3), node_id(1e-4, 1, 0), node_id(1e-4, 2, 0)]
+    )
     starts = {n for n, s in lon.nodes(data="start") if s}
     assert starts == {node_id(1e-4, r, 0) for r in range(3)}
     assert lon.nodes[node_id(1e-4, 0, 3)]["best"] and lon.nodes[node_id(1e-4, 1, 0)]["best"]

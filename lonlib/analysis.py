@@ -1,0 +1,142 @@
+"""One experiment folder -> the paper's analysis: figures, metrics, peaks, recordings.
+
+The notebooks call these functions; ``make reproduce`` runs the notebooks. Outputs go to
+``<experiment>/figures/`` and ``<experiment>/recordings/`` (never overwriting anything but
+the figures and tables derived here).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from lonlib.experiment import ExperimentConfig
+from lonlib.lon import build_lon, lon_metrics, sinks
+from lonlib.peaks import compare_with_paper, detect_peaks
+from lonlib.plots import fitness_histogram, lon_3d, lon_3d_html, optima_boxplot, sensitivity
+from lonlib.record import record, recording_name
+from lonlib.store import optimum_path, p_label, read_experiment_trials, read_json, read_optimum
+
+
+def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
+    """The stored configuration and all trials of an experiment folder."""
+    folder = Path(folder)
+    config = ExperimentConfig.from_mapping(read_json(folder / "manifest.json")["config"])
+    trials = read_experiment_trials(folder)
+    if trials.empty:
+        raise ValueError(f"{folder} holds no finished local search yet")
+    return config, trials
+
+
+@dataclass
+class Analysis:
+    """What :func:`analyse` produced: tables, and the files it wrote."""
+
+    metrics: pd.DataFrame
+    peaks: pd.DataFrame
+    files: list[Path] = field(default_factory=list)
+    figures: dict[str, plt.Figure] = field(default_factory=dict)
+
+
+def analyse(
+    folder: str | Path,
+    seed: int = 0,
+    tolerance: float = 1e-9,
+    bins: int = 50,
+    close_figures: bool = False,
+) -> Analysis:
+    """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, and
+    a sensitivity view when more than two p values are present."""
+    folder = Path(folder)
+    _, trials = load_experiment(folder)
+    out = folder / "figures"
+    out.mkdir(parents=True, exist_ok=True)
+    result = Analysis(metrics=pd.DataFrame(), peaks=pd.DataFrame())
+
+    def save(name: str, fig: plt.Figure) -> None:
+        path = out / f"{name}.png"
+        fig.savefig(path, dpi=120)
+        result.files.append(path)
+        result.figures[name] = fig
+        if close_figures:
+            plt.close(fig)
+
+    save("fig2_optima_boxplot", optima_boxplot(trials))
+    metric_rows, peak_rows = [], []
+    for p, group in trials.groupby("p", sort=True):
+        graph = build_lon(group, "max", tolerance)
+        label = p_label(p)
+        metric_rows.append({"p": p, **lon_metrics(graph)})
+        save(f"fig3_lon_p={label}", lon_3d(graph, seed, title=f"3-D LON, p = {label}"))
+        html = lon_3d_html(
+            graph, out / f"fig3_lon_p={label}.html", seed, title=f"3-D LON, p = {label}"
+        )
+        result.files.append(html)
+        sink_fitness = np.array([graph.nodes[n]["fitness"] for n in sinks(graph)])
+        optima_fitness = np.array([f for _, f in graph.nodes(data="fitness")])
+        save(
+            f"fig4_sinks_p={label}",
+            fitness_histogram(sink_fitness, f"Fitness of sinks, p = {label}", bins),
+        )
+        save(
+            f"fig5_optima_p={label}",
+            fitness_histogram(optima_fitness, f"Fitness of local optima, p = {label}", bins),
+        )
+        for what, values in (("sinks", sink_fitness), ("optima", optima_fitness)):
+            table = compare_with_paper(detect_peaks(values, bins=bins))
+            peak_rows.append(table.assign(p=p, histogram=what))
+    result.metrics = pd.DataFrame(metric_rows)
+    result.peaks = pd.concat(peak_rows, ignore_index=True)
+    for name, table in (("metrics", result.metrics), ("peaks", result.peaks)):
+        path = out / f"{name}.csv"
+        table.to_csv(path, index=False)
+        result.files.append(path)
+    if trials["p"].nunique() > 2:
+        save("sensitivity", sensitivity(result.metrics))
+    return result
+
+
+def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e-9) -> pd.DataFrame:
+    """The best optimum of each p and, per detected sink-fitness peak, the sink nearest it
+    (one row per distinct optimum: p, run, index, fitness, role)."""
+    rows: dict[str, dict] = {}
+    for _, group in trials.groupby("p", sort=True):
+        graph = build_lon(group, "max", tolerance)
+        chosen = [(max(graph.nodes, key=lambda n: graph.nodes[n]["fitness"]), "best")]
+        sink_nodes = sinks(graph)
+        values = np.array([graph.nodes[n]["fitness"] for n in sink_nodes])
+        for peak in detect_peaks(values, bins=bins)["fitness"]:
+            nearest = sink_nodes[int(np.argmin(np.abs(values - peak)))]
+            chosen.append((nearest, f"sink-peak-{peak:.2f}"))
+        for node, role in chosen:
+            data = graph.nodes[node]
+            rows.setdefault(
+                node,
+                {
+                    "p": data["p"],
+                    "run": data["run"],
+                    "index": data["index"],
+                    "fitness": data["fitness"],
+                    "role": role,
+                },
+            )
+    return pd.DataFrame(list(rows.values()))
+
+
+def record_optima(folder: str | Path, bins: int = 50, limit: int = 12) -> list[Path]:
+    """Rerun recordings of the selected optima under ``<experiment>/recordings/``."""
+    folder = Path(folder)
+    config, trials = load_experiment(folder)
+    selection = optima_to_record(trials, bins).head(limit)
+    paths = []
+    for row in selection.itertuples():
+        optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
+        name = recording_name(row.p, int(row.run), row.fitness, label=row.role)
+        path = folder / "recordings" / name
+        record(optimum.theta, config.env, path, title=f"{row.role} p={p_label(row.p)}")
+        paths.append(path)
+    return paths

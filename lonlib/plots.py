@@ -1,0 +1,227 @@
+"""The paper's figures (2-5), the 3-D LON (PNG and interactive HTML) and a sensitivity view.
+
+Every function returns a figure (matplotlib, or plotly for the HTML LON) and leaves saving
+to the caller, except :func:`lon_3d_html` which writes a self-contained file (plotly.js
+embedded, opens offline in a browser).
+"""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import networkx as nx
+import numpy as np
+import pandas as pd
+
+from lonlib.lon import to_igraph
+from lonlib.peaks import PAPER_PEAKS, detect_peaks
+from lonlib.store import p_label
+
+GREY, RED = "#8a8a8a", "#d62728"
+
+
+def optima_boxplot(trials: pd.DataFrame) -> plt.Figure:
+    """Fig. 2: fitness of the accepted local optima, one box per perturbation strength."""
+    accepted = trials[trials["accepted"]]
+    ps = sorted(accepted["p"].unique(), reverse=True)
+    fig, ax = plt.subplots(figsize=(5, 4))
+    ax.boxplot(
+        [accepted.loc[accepted["p"] == p, "fitness"] for p in ps],
+        tick_labels=[p_label(p) for p in ps],
+    )
+    ax.set_xlabel("perturbation strength p")
+    ax.set_ylabel("local optimum fitness")
+    ax.set_title("Fitness of sampled local optima")
+    fig.tight_layout()
+    return fig
+
+
+def layout_2d(graph: nx.DiGraph, seed: int = 0) -> dict[str, tuple[float, float]]:
+    """Fruchterman-Reingold positions in the plane (igraph), reproducible through ``seed``."""
+    if graph.number_of_nodes() == 0:
+        return {}
+    ig_graph = to_igraph(graph)
+    random.seed(seed)  # igraph layouts draw from Python's random
+    coords = ig_graph.layout_fruchterman_reingold(niter=500)
+    return {name: tuple(xy) for name, xy in zip(ig_graph.vs["_nx_name"], coords, strict=True)}
+
+
+def _node_roles(graph: nx.DiGraph) -> dict[str, list[str]]:
+    roles: dict[str, list[str]] = {"best": [], "start": [], "other": []}
+    for name, data in graph.nodes(data=True):
+        if data.get("best"):
+            roles["best"].append(name)
+        elif data.get("start"):
+            roles["start"].append(name)
+        else:
+            roles["other"].append(name)
+    return roles
+
+
+def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figure:
+    """Fig. 3: LON in 3-D, layout in the plane and z = fitness. Grey nodes, the best node
+    red, start nodes small, edges drawn as arrows from the old to the new optimum."""
+    pos = layout_2d(graph, seed)
+    fig = plt.figure(figsize=(7, 6))
+    ax = fig.add_subplot(projection="3d")
+    for u, v in graph.edges:
+        (x0, y0), (x1, y1) = pos[u], pos[v]
+        z0, z1 = graph.nodes[u]["fitness"], graph.nodes[v]["fitness"]
+        ax.quiver(
+            x0,
+            y0,
+            z0,
+            x1 - x0,
+            y1 - y0,
+            z1 - z0,
+            color="#b0b0b0",
+            linewidth=0.7,
+            arrow_length_ratio=0.15,
+        )
+    styles = {"other": (GREY, 30), "start": (GREY, 8), "best": (RED, 60)}
+    for role, names in _node_roles(graph).items():
+        if not names:
+            continue
+        color, size = styles[role]
+        xyz = np.array([(*pos[n], graph.nodes[n]["fitness"]) for n in names])
+        ax.scatter(
+            xyz[:, 0],
+            xyz[:, 1],
+            xyz[:, 2],
+            c=color,
+            s=size,
+            depthshade=False,
+            label={"other": "local optimum", "start": "start node", "best": "best optimum"}[role],
+        )
+    ax.set_zlabel("fitness")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_title(title)
+    ax.legend(loc="upper left", fontsize=8)
+    return fig
+
+
+def lon_3d_html(graph: nx.DiGraph, path: str | Path, seed: int = 0, title: str = "3-D LON") -> Path:
+    """The 3-D LON as an interactive plotly page (rotate, zoom, hover for node details)."""
+    import plotly.graph_objects as go
+
+    pos = layout_2d(graph, seed)
+    traces = []
+    xs, ys, zs = [], [], []
+    for u, v in graph.edges:
+        for node in (u, v):
+            xs.append(pos[node][0])
+            ys.append(pos[node][1])
+            zs.append(graph.nodes[node]["fitness"])
+        xs.append(None)
+        ys.append(None)
+        zs.append(None)
+    traces.append(
+        go.Scatter3d(
+            x=xs,
+            y=ys,
+            z=zs,
+            mode="lines",
+            name="transitions",
+            line={"color": "#b0b0b0", "width": 2},
+            hoverinfo="skip",
+        )
+    )
+    if graph.number_of_edges():
+        u_pts = np.array([(*pos[u], graph.nodes[u]["fitness"]) for u, _ in graph.edges])
+        v_pts = np.array([(*pos[v], graph.nodes[v]["fitness"]) for _, v in graph.edges])
+        direction = v_pts - u_pts
+        tips = u_pts + 0.85 * direction
+        traces.append(
+            go.Cone(
+                x=tips[:, 0],
+                y=tips[:, 1],
+                z=tips[:, 2],
+                u=direction[:, 0],
+                v=direction[:, 1],
+                w=direction[:, 2],
+                sizemode="absolute",
+                sizeref=0.05,
+                showscale=False,
+                colorscale=[[0, "#b0b0b0"], [1, "#b0b0b0"]],
+                name="direction",
+                hoverinfo="skip",
+            )
+        )
+    styles = {"other": (GREY, 5), "start": (GREY, 2.5), "best": (RED, 9)}
+    for role, names in _node_roles(graph).items():
+        if not names:
+            continue
+        color, size = styles[role]
+        traces.append(
+            go.Scatter3d(
+                x=[pos[n][0] for n in names],
+                y=[pos[n][1] for n in names],
+                z=[graph.nodes[n]["fitness"] for n in names],
+                mode="markers",
+                name=role,
+                marker={"color": color, "size": size},
+                text=[f"{n}<br>fitness {graph.nodes[n]['fitness']:.3f}" for n in names],
+                hoverinfo="text",
+            )
+        )
+    fig = go.Figure(traces)
+    fig.update_layout(
+        title=title,
+        scene={"zaxis_title": "fitness", "xaxis_visible": False, "yaxis_visible": False},
+    )
+    path = Path(path)
+    fig.write_html(path, include_plotlyjs=True, full_html=True)
+    return path
+
+
+def fitness_histogram(
+    values: np.ndarray, title: str, bins: int = 50, paper_peaks: tuple[float, ...] = PAPER_PEAKS
+) -> plt.Figure:
+    """Figs. 4 and 5: histogram of fitness values with detected peaks (triangles) and the
+    paper's peaks (dashed lines)."""
+    values = np.asarray(values, dtype=float)
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.hist(values, bins=bins, range=(0, 1), color=GREY, edgecolor="white")
+    peaks = detect_peaks(values, bins=bins)
+    if len(peaks):
+        ax.plot(peaks["fitness"], peaks["count"] + 0.3, "v", color=RED, label="detected peak")
+    for i, peak in enumerate(paper_peaks):
+        ax.axvline(
+            peak,
+            color="#1f77b4",
+            linestyle="--",
+            linewidth=0.8,
+            label="paper's peaks" if i == 0 else None,
+        )
+    ax.set_xlabel("fitness")
+    ax.set_ylabel("count")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def sensitivity(
+    metrics: pd.DataFrame,
+    columns: tuple[str, ...] = (
+        "optima",
+        "sinks",
+        "best",
+        "success",
+        "global_funnel_proportion",
+        "neutral",
+    ),
+) -> plt.Figure:
+    """LON metrics against the perturbation strength (log scale), one panel per metric."""
+    table = metrics.sort_values("p")
+    fig, axes = plt.subplots(1, len(columns), figsize=(3 * len(columns), 3))
+    for ax, column in zip(np.atleast_1d(axes), columns, strict=True):
+        ax.plot(table["p"], table[column], "o-", color="#1f77b4")
+        ax.set_xscale("log")
+        ax.set_xlabel("perturbation strength p")
+        ax.set_title(column)
+    fig.tight_layout()
+    return fig

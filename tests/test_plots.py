@@ -1,0 +1,80 @@
+"""Figure functions return figures with the expected content; peak detection."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Path3DCollection  # noqa: E402
+
+from lonlib.lon import build_lon  # noqa: E402
+from lonlib.peaks import PAPER_PEAKS, compare_with_paper, detect_peaks  # noqa: E402
+from lonlib.plots import (  # noqa: E402
+    fitness_histogram,
+    lon_3d,
+    lon_3d_html,
+    optima_boxplot,
+    sensitivity,
+)
+from tests.test_lon import HAND, trials  # noqa: E402
+
+
+def test_boxplot_has_one_box_per_p_and_labels():
+    sample = trials([(0, 0, -1, 0.3, True), (0, 1, 0, 0.4, True)], p=1e-3)
+    fig = optima_boxplot(__import__("pandas").concat([HAND, sample]))
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "perturbation strength p"
+    assert ax.get_ylabel() == "local optimum fitness"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0.001", "0.0001"]
+    assert len([line for line in ax.lines if line.get_label() == "_nolegend_"]) >= 2 * 6
+
+
+def test_lon_3d_draws_every_node_with_fitness_as_height(tmp_path):
+    graph = build_lon(HAND)
+    fig = lon_3d(graph)
+    ax = fig.axes[0]
+    scatters = [c for c in ax.collections if isinstance(c, Path3DCollection)]
+    heights = np.concatenate([c._offsets3d[2] for c in scatters])
+    assert len(heights) == graph.number_of_nodes()
+    assert sorted(heights) == sorted(f for _, f in graph.nodes(data="fitness"))
+    assert ax.get_zlabel() == "fitness"
+    html = lon_3d_html(graph, tmp_path / "lon.html").read_text()
+    assert "plotly" in html and len(html) > 100_000  # plotly.js embedded: works offline
+
+
+def test_histograms_mark_detected_and_paper_peaks():
+    rng = np.random.default_rng(0)
+    values = np.concatenate([rng.normal(peak, 0.01, 100) for peak in PAPER_PEAKS])
+    peaks = detect_peaks(values)
+    assert len(peaks) == 5
+    table = compare_with_paper(peaks)
+    assert (table["distance"] <= 0.02).all()
+    fig = fitness_histogram(values, "sinks")
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "fitness" and ax.get_ylabel() == "count"
+    assert len([line for line in ax.lines if line.get_linestyle() == "--"]) == 5
+
+
+def test_peaks_at_the_edges_and_empty_input():
+    assert list(detect_peaks(np.zeros(30))["fitness"]) == pytest.approx([0.01])
+    assert detect_peaks(np.array([])).empty
+    assert compare_with_paper(detect_peaks(np.array([])))["nearest_detected"].isna().all()
+
+
+def test_sensitivity_has_a_panel_per_metric():
+    import pandas as pd
+
+    metrics = pd.DataFrame(
+        {
+            "p": [1e-4, 1e-3, 1e-2],
+            "optima": [3, 4, 5],
+            "sinks": [1, 2, 3],
+            "best": [0.5, 0.4, 0.3],
+            "success": [1, 0.5, 0.2],
+            "global_funnel_proportion": [1, 1, 0.5],
+            "neutral": [0, 0, 0.1],
+        }
+    )
+    fig = sensitivity(metrics)
+    assert len(fig.axes) == 6 and fig.axes[0].get_xscale() == "log"
