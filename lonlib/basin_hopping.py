@@ -12,6 +12,7 @@ ends). Every local search is recorded as a :class:`Trial`, accepted or not, with
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -44,6 +45,7 @@ class LocalOptimum:
     theta: np.ndarray
     omega: np.ndarray
     env_steps: int = 0
+    history: list[dict] | None = None  # per-episode training record, if the search keeps one
 
 
 LocalSearch = Callable[[np.ndarray, np.ndarray, int], LocalOptimum]
@@ -149,6 +151,7 @@ def ddpg_local_search(env_config, hp) -> LocalSearch:
 
     def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
         result = local_search(theta, omega, env_config, hp, seed)
-        return LocalOptimum(result.fitness, result.theta, result.omega, result.env_steps)
+        history = [dataclasses.asdict(record) for record in result.history]
+        return LocalOptimum(result.fitness, result.theta, result.omega, result.env_steps, history)
 
     return search

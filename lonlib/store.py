@@ -6,6 +6,7 @@ Layout::
         manifest.json                 configuration, lonlib version, git commit, packages, times
         p=<p>/run_<run>/trials.parquet    every local search of the run (the commit point)
         p=<p>/run_<run>/optimum_<i>.npz   accepted optimum i: theta, omega (float32, compressed)
+        p=<p>/run_<run>/history_<i>.parquet  local search i's training curve (per episode)
 
 Every file is written to a temporary name in the same folder and renamed into place, so a
 reader never sees half a file. After each local search the optimum (if accepted) is written
@@ -83,11 +84,23 @@ def optimum_path(root: Path, p: float, run: int, index: int) -> Path:
     return run_dir(root, p, run) / f"optimum_{index:04d}.npz"
 
 
+def history_path(root: Path, p: float, run: int, index: int) -> Path:
+    """The per-episode training record of local search ``index`` of one run."""
+    return run_dir(root, p, run) / f"history_{index:04d}.parquet"
+
+
 def save_step(
     root: Path, p: float, run: int, trials: list[Trial], optimum: LocalOptimum | None
 ) -> None:
-    """Persist one finished local search: its optimum (if accepted), then the trials table."""
+    """Persist one finished local search: its training history and optimum (if accepted),
+    then the trials table (the commit point)."""
     last = trials[-1]
+    if optimum is not None and optimum.history:
+        history = pd.DataFrame(optimum.history)
+        atomic_write(
+            history_path(root, p, run, last.index),
+            lambda tmp: history.to_parquet(tmp, index=False),
+        )
     if optimum is not None and last.accepted:
         path = optimum_path(root, p, run, last.index)
 

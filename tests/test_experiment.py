@@ -17,7 +17,13 @@ from lonlib.experiment import (
     run_experiment,
     status,
 )
-from lonlib.store import CorruptDataError, optimum_path, read_optimum, trials_path
+from lonlib.store import (
+    CorruptDataError,
+    history_path,
+    optimum_path,
+    read_optimum,
+    trials_path,
+)
 from tests.conftest import write_tiny_yaml
 
 COMPARED = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps"]
@@ -36,6 +42,9 @@ def test_serial_run_stores_trials_optima_and_manifest(reference):
         optimum = read_optimum(optimum_path(out, row.p, row.run, row.index))
         assert optimum.fitness == row.fitness
         assert optimum.theta.dtype.name == "float32"
+    for row in trials.itertuples():
+        history = pd.read_parquet(history_path(out, row.p, row.run, row.index))
+        assert history["env_steps"].iloc[-1] <= row.env_steps and len(history) > 1
     manifest = (out / "manifest.json").read_text()
     for key in ("git_commit", "versions", "torch", "created", "lonlib_version"):
         assert key in manifest
