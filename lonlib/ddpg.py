@@ -58,7 +58,7 @@ class DDPGConfig:
     min_steps: int = 60_000
     patience_steps: int = 40_000
     eval_seed: int = 0
-    plateau_tiebreak: bool = False
+    plateau_tiebreak: bool = True
     device: str = "cpu"
     threads: int = 1
 
@@ -109,6 +109,16 @@ class LocalSearchResult:
     seconds: float
     stop_reason: str  # "patience" or "budget"
     history: list[EpisodeRecord] = field(default_factory=list)
+
+
+def is_improvement(
+    candidate: tuple[float, float], incumbent: tuple[float, float], plateau_tiebreak: bool
+) -> bool:
+    """Does a greedy ``(fitness, return)`` beat the best so far? Higher fitness always does;
+    with ``plateau_tiebreak``, equal fitness and a higher reward return does too."""
+    if candidate[0] != incumbent[0] or not plateau_tiebreak:
+        return candidate[0] > incumbent[0]
+    return candidate[1] > incumbent[1] + 1e-9
 
 
 def check_parameters(name: str, values: np.ndarray, size: int, agents: int) -> np.ndarray:
@@ -175,12 +185,6 @@ def local_search_batch(
         result = evaluate(policy, env_config, 1, hp.eval_seed)
         return float(result.fitness[0]), float(result.episode_return[0])
 
-    def better(candidate: tuple[float, float], incumbent: tuple[float, float]) -> bool:
-        """Higher fitness; with ``plateau_tiebreak``, equal fitness and a higher return."""
-        if candidate[0] != incumbent[0] or not hp.plateau_tiebreak:
-            return candidate[0] > incumbent[0]
-        return candidate[1] > incumbent[1] + 1e-9
-
     scores = [greedy(thetas[i]) for i in range(k)]
     best = [score[0] for score in scores]
     results = [
@@ -245,7 +249,7 @@ def local_search_batch(
             for i in np.flatnonzero(ended & active):
                 score = greedy(flat_actor[i])
                 fitness = score[0]
-                if better(score, scores[i]):
+                if is_improvement(score, scores[i], hp.plateau_tiebreak):
                     scores[i] = score
                     results[i].fitness = fitness
                     results[i].theta = flat_actor[i].copy()

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from lonlib.ddpg import DDPGConfig, local_search, local_search_batch
+from lonlib.ddpg import DDPGConfig, is_improvement, local_search, local_search_batch
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
 
@@ -80,11 +80,19 @@ def test_same_seed_same_result_and_history_is_complete():
 
 def test_patience_stops_a_search_that_does_not_improve():
     env = PendulumConfig(n_carts=1, steps=50)
-    hp = DDPGConfig(max_steps=5000, patience_steps=200, **SMALL)
+    hp = DDPGConfig(max_steps=5000, patience_steps=200, plateau_tiebreak=False, **SMALL)
     theta, omega = initial(1, 1)
     result = local_search(theta[0], omega[0], env, hp, seed=0)
     assert result.stop_reason == "patience"
     assert result.env_steps < 5000
+
+
+def test_plateau_tiebreak_counts_return_progress_only_on_equal_fitness():
+    assert is_improvement((0.2, -9.0), (0.1, 50.0), plateau_tiebreak=True)
+    assert not is_improvement((0.1, 60.0), (0.2, 0.0), plateau_tiebreak=True)
+    assert is_improvement((0.0, 3.0), (0.0, 2.0), plateau_tiebreak=True)
+    assert not is_improvement((0.0, 3.0), (0.0, 2.0), plateau_tiebreak=False)
+    assert not is_improvement((0.0, 2.0), (0.0, 2.0), plateau_tiebreak=True)
 
 
 def test_ddpg_learns_a_task_with_known_good_behaviour():
