@@ -58,7 +58,7 @@ class DDPGConfig:
     min_steps: int = 60_000
     patience_steps: int = 40_000
     eval_seed: int = 0
-    plateau_tiebreak: bool = True
+    plateau_tiebreak: bool = False
     device: str = "cpu"
     threads: int = 1
 
