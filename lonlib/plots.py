@@ -49,52 +49,46 @@ def layout_2d(graph: nx.DiGraph, seed: int = 0) -> dict[str, tuple[float, float]
 
 
 def _node_roles(graph: nx.DiGraph) -> dict[str, list[str]]:
-    roles: dict[str, list[str]] = {"best": [], "start": [], "other": []}
+    """Partition nodes by how they are drawn: colour marks the best, size marks a start."""
+    roles: dict[str, list[str]] = {"other": [], "start": [], "best": [], "best start": []}
     for name, data in graph.nodes(data=True):
-        if data.get("best"):
-            roles["best"].append(name)
-        elif data.get("start"):
-            roles["start"].append(name)
-        else:
-            roles["other"].append(name)
+        best, start = bool(data.get("best")), bool(data.get("start"))
+        role = {
+            (True, True): "best start",
+            (True, False): "best",
+            (False, True): "start",
+            (False, False): "other",
+        }[best, start]
+        roles[role].append(name)
     return roles
+
+
+NODE_STYLE = {  # role -> (colour, matplotlib size, plotly size, legend label)
+    "other": (GREY, 30, 5, "local optimum"),
+    "start": (GREY, 8, 2.5, "start node"),
+    "best": (RED, 60, 9, "best optimum"),
+    "best start": (RED, 14, 4, "best optimum (a start node)"),
+}
 
 
 def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figure:
     """Fig. 3: LON in 3-D, layout in the plane and z = fitness. Grey nodes, the best node
-    red, start nodes small, edges drawn as arrows from the old to the new optimum."""
+    red, start nodes small; an edge darkens towards the optimum it leads to."""
     pos = layout_2d(graph, seed)
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
     for u, v in graph.edges:
-        (x0, y0), (x1, y1) = pos[u], pos[v]
-        z0, z1 = graph.nodes[u]["fitness"], graph.nodes[v]["fitness"]
-        ax.quiver(
-            x0,
-            y0,
-            z0,
-            x1 - x0,
-            y1 - y0,
-            z1 - z0,
-            color="#b0b0b0",
-            linewidth=0.7,
-            arrow_length_ratio=0.15,
-        )
-    styles = {"other": (GREY, 30), "start": (GREY, 8), "best": (RED, 60)}
+        start = np.array([*pos[u], graph.nodes[u]["fitness"]])
+        end = np.array([*pos[v], graph.nodes[v]["fitness"]])
+        head = start + 0.65 * (end - start)
+        ax.plot(*np.stack([start, head]).T, color="#c8c8c8", linewidth=0.8)
+        ax.plot(*np.stack([head, end]).T, color="#505050", linewidth=1.6)
     for role, names in _node_roles(graph).items():
         if not names:
             continue
-        color, size = styles[role]
+        color, size, _, label = NODE_STYLE[role]
         xyz = np.array([(*pos[n], graph.nodes[n]["fitness"]) for n in names])
-        ax.scatter(
-            xyz[:, 0],
-            xyz[:, 1],
-            xyz[:, 2],
-            c=color,
-            s=size,
-            depthshade=False,
-            label={"other": "local optimum", "start": "start node", "best": "best optimum"}[role],
-        )
+        ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], c=color, s=size, depthshade=False, label=label)
     ax.set_zlabel("fitness")
     ax.set_xticks([])
     ax.set_yticks([])
@@ -150,18 +144,17 @@ def lon_3d_html(graph: nx.DiGraph, path: str | Path, seed: int = 0, title: str =
                 hoverinfo="skip",
             )
         )
-    styles = {"other": (GREY, 5), "start": (GREY, 2.5), "best": (RED, 9)}
     for role, names in _node_roles(graph).items():
         if not names:
             continue
-        color, size = styles[role]
+        color, _, size, label = NODE_STYLE[role]
         traces.append(
             go.Scatter3d(
                 x=[pos[n][0] for n in names],
                 y=[pos[n][1] for n in names],
                 z=[graph.nodes[n]["fitness"] for n in names],
                 mode="markers",
-                name=role,
+                name=label,
                 marker={"color": color, "size": size},
                 text=[f"{n}<br>fitness {graph.nodes[n]['fitness']:.3f}" for n in names],
                 hoverinfo="text",
