@@ -22,9 +22,9 @@ HP = DDPGConfig(warmup_steps=2000, min_steps=0, patience_steps=10**9)
 ENV = PendulumConfig(n_carts=2)
 
 
-def updates_per_second_per_agent(k: int, updates: int = 20) -> float:
+def updates_per_second_per_agent(k: int, updates: int = 20, threads: int = 1) -> float:
     """Batched DDPG updates of ``k`` agents on a full replay buffer of random transitions."""
-    torch.set_num_threads(1)
+    torch.set_num_threads(threads)
     rng = np.random.default_rng(0)
     a_spec, c_spec = actor_spec(2), critic_spec(2)
     actor = BatchedMLP(a_spec, np.stack([a_spec.initial(rng) for _ in range(k)]))
@@ -32,9 +32,8 @@ def updates_per_second_per_agent(k: int, updates: int = 20) -> float:
     targets = copy.deepcopy(actor), copy.deepcopy(critic)
     optims = [torch.optim.Adam(m.parameters(), lr=1e-3, fused=True) for m in (actor, critic)]
     replay = ReplayBuffer(k, HP.buffer_size, 20, 2, torch.device("cpu"))
-    for buffer in (replay.obs, replay.next_obs, replay.actions, replay.rewards):
-        buffer.uniform_()
-    replay.not_done.fill_(1.0)
+    replay.data.uniform_()
+    replay.data[..., -1] = 1.0  # no terminal transitions
     replay.size = HP.buffer_size
 
     def one() -> None:
@@ -63,7 +62,7 @@ def lonlib_seconds_per_2000_training_steps() -> float:
     return run(4000) - run(2000)
 
 
-def sb3_seconds_per_2000_training_steps() -> float | None:
+def sb3_seconds_per_2000_training_steps(threads: int = 1) -> float | None:
     """The same for Stable-Baselines3's DDPG on the Gymnasium env (None if not installed)."""
     try:
         import gymnasium as gym
@@ -73,7 +72,7 @@ def sb3_seconds_per_2000_training_steps() -> float | None:
         return None
     import lonlib  # noqa: F401  (registers the env)
 
-    torch.set_num_threads(1)
+    torch.set_num_threads(threads)
 
     def run(steps: int) -> float:
         env = gym.make(lonlib.ENV_ID, n_carts=2)
@@ -101,24 +100,39 @@ def sb3_seconds_per_2000_training_steps() -> float | None:
 
 
 def main() -> None:
-    """Run the DDPG benchmarks and report them."""
+    """Run the DDPG benchmarks and report them (one and two torch threads on both sides)."""
     rows = []
-    sb3 = sb3_seconds_per_2000_training_steps()
     ours = lonlib_seconds_per_2000_training_steps()
-    sb3_per_agent_rate = 2000 / sb3 if sb3 else None
-    for k in (1, 16, 64):
-        rate = updates_per_second_per_agent(k)
+    for threads in (1, 2):
+        sb3 = sb3_seconds_per_2000_training_steps(threads)
+        sb3_rate = 2000 / sb3 if sb3 else None
+        for k in (1, 16, 64):
+            rate = updates_per_second_per_agent(k, threads=threads)
+            rows.append(
+                {
+                    "measure": f"updates/s per agent, k = {k}",
+                    "threads": threads,
+                    "value": rate,
+                    "x SB3 steps/s": rate / sb3_rate if sb3 else None,
+                }
+            )
+        if sb3:
+            rows.append(
+                {
+                    "measure": "SB3 DDPG: s per 2000 training env-steps",
+                    "threads": threads,
+                    "value": sb3,
+                }
+            )
+        else:
+            rows.append({"measure": "SB3 not installed (pip install -e .[bench])", "value": None})
+    torch.set_num_threads(1)
+    rows.append(
+        {"measure": "lonlib: s per 2000 training env-steps (k = 1)", "threads": 1, "value": ours}
+    )
+    sb3_one = next((r["value"] for r in rows if r["measure"].startswith("SB3 DDPG")), None)
+    if sb3_one:
         rows.append(
-            {
-                "measure": f"updates/s per agent, k = {k}",
-                "value": rate,
-                "x SB3 steps/s": rate / sb3_per_agent_rate if sb3 else None,
-            }
+            {"measure": "SB3 time / lonlib time (k = 1)", "threads": 1, "value": sb3_one / ours}
         )
-    rows.append({"measure": "lonlib: s per 2000 training env-steps (k = 1)", "value": ours})
-    if sb3:
-        rows.append({"measure": "SB3 DDPG: s per 2000 training env-steps", "value": sb3})
-        rows.append({"measure": "SB3 time / lonlib time (k = 1)", "value": sb3 / ours})
-    else:
-        rows.append({"measure": "SB3 not installed (pip install -e .[bench])", "value": None})
     report("ddpg", rows)

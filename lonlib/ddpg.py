@@ -307,22 +307,23 @@ def _reset(sim: CoupledPendulums, rngs: list[np.random.Generator], mask: np.ndar
 
 
 class ReplayBuffer:
-    """``k`` ring buffers of transitions held as torch tensors (``[k, capacity, ...]``).
+    """``k`` ring buffers of transitions in one torch tensor ``[k, capacity, width]``.
 
-    All agents step together, so one write position and one size serve every agent.
+    A row packs ``(s, a, r, s', 1 - terminated)``, so a sample is one ``index_select`` per
+    batch instead of one gather per field. All agents step together, so one write position
+    and one size serve every agent.
     """
 
     def __init__(
         self, agents: int, capacity: int, obs_size: int, act_size: int, device: torch.device
     ) -> None:
-        def zeros(*shape: int) -> torch.Tensor:
-            return torch.zeros(agents, capacity, *shape, device=device)
-
-        self.obs, self.next_obs = zeros(obs_size), zeros(obs_size)
-        self.actions, self.rewards, self.not_done = zeros(act_size), zeros(1), zeros(1)
+        self.obs_size, self.act_size = obs_size, act_size
+        width = 2 * obs_size + act_size + 2
+        self.data = torch.zeros(agents, capacity, width, device=device)
         self.capacity, self.position, self.size = capacity, 0, 0
         self.device = device
-        self._agents = torch.arange(agents, device=device)[:, None]
+        self._row = np.zeros((agents, width), dtype=np.float32)
+        self._offsets = torch.arange(agents, device=device)[:, None] * capacity
 
     def add(
         self,
@@ -333,25 +334,30 @@ class ReplayBuffer:
         terminated: np.ndarray,
     ) -> None:
         """Store one transition per agent (arrays with a leading agent dimension)."""
-        p = self.position
-        self.obs[:, p] = torch.as_tensor(obs)
-        self.actions[:, p] = torch.as_tensor(actions, dtype=torch.float32)
-        self.rewards[:, p, 0] = torch.as_tensor(rewards, dtype=torch.float32)
-        self.next_obs[:, p] = torch.as_tensor(next_obs)
-        self.not_done[:, p, 0] = torch.as_tensor(~terminated, dtype=torch.float32)
-        self.position = (p + 1) % self.capacity
+        o, a = self.obs_size, self.act_size
+        row = self._row
+        row[:, :o] = obs
+        row[:, o : o + a] = actions
+        row[:, o + a] = rewards
+        row[:, o + a + 1 : 2 * o + a + 1] = next_obs
+        row[:, -1] = ~terminated
+        self.data[:, self.position] = torch.from_numpy(row)
+        self.position = (self.position + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
     def sample(self, indices: np.ndarray) -> tuple[torch.Tensor, ...]:
-        """Transitions at ``indices [k, batch]`` (agent ``i`` reads only its own buffer)."""
-        idx = torch.as_tensor(indices, device=self.device)
-        a = self._agents
+        """Transitions at ``indices [k, batch]`` (agent ``i`` reads only its own buffer):
+        ``(s, a, r, s', not_done)``, each ``[k, batch, ...]``."""
+        idx = torch.as_tensor(indices, device=self.device) + self._offsets
+        flat = self.data.view(-1, self.data.shape[-1])
+        batch = flat.index_select(0, idx.view(-1)).view(*idx.shape, -1)
+        o, a = self.obs_size, self.act_size
         return (
-            self.obs[a, idx],
-            self.actions[a, idx],
-            self.rewards[a, idx],
-            self.next_obs[a, idx],
-            self.not_done[a, idx],
+            batch[..., :o],
+            batch[..., o : o + a],
+            batch[..., o + a : o + a + 1],
+            batch[..., o + a + 1 : 2 * o + a + 1],
+            batch[..., -1:],
         )
 
 
@@ -387,5 +393,5 @@ def _update(
 
     with torch.no_grad():
         for net, target_net in ((actor, actor_target), (critic, critic_target)):
-            torch._foreach_lerp_(list(target_net.parameters()), list(net.parameters()), hp.tau)
+            torch._foreach_lerp_(target_net.tensors, net.tensors, hp.tau)
     return critic_loss.detach().cpu().numpy(), actor_loss.detach().cpu().numpy()

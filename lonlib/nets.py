@@ -122,6 +122,9 @@ class BatchedMLP(torch.nn.Module):
         for weight, bias in spec.unflatten(flat):
             self.weights.append(torch.nn.Parameter(weight.clone().contiguous()))
             self.biases.append(torch.nn.Parameter(bias.clone().contiguous()))
+        # Plain lists: iterating a ParameterList costs more than a small layer's matmul.
+        self.layers = list(zip(self.weights, self.biases, strict=True))
+        self.tensors = [t for layer in self.layers for t in layer]
 
     @property
     def agents(self) -> int:
@@ -130,8 +133,8 @@ class BatchedMLP(torch.nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``[k, B, in]`` -> ``[k, B, out]``."""
-        last = len(self.weights) - 1
-        for i, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
+        last = len(self.layers) - 1
+        for i, (weight, bias) in enumerate(self.layers):
             x = torch.baddbmm(bias.unsqueeze(1), x, weight.transpose(1, 2))
             if i < last or self.spec.sigmoid_output:
                 x = torch.sigmoid(x)
