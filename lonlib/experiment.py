@@ -102,9 +102,12 @@ class ExperimentConfig:
         unknown = sorted(set(values) - known)
         if unknown:
             raise ValueError(f"unknown experiment key(s) {unknown}; allowed: {sorted(known)}")
+        given = sorted(set(values) - {"name"})
         env = {**start.pop("env"), **(values.pop("env", None) or {})}
         ddpg = {**start.pop("ddpg"), **(values.pop("ddpg", None) or {})}
         merged = {**start, **values}
+        if "note" not in values and given:
+            merged["note"] = f"based on {base or 'the defaults'}, changed: {', '.join(given)}"
         merged["perturbations"] = tuple(
             _as_float("perturbations", p) for p in merged["perturbations"]
         )
