@@ -152,3 +152,42 @@ def test_cli_lon_prints_metrics_and_writes_exports(reference, tmp_path, capsys):
     assert {"metrics.csv", "lon_p=0.0001_full.trace", "lon_p=0.001_full.graphml"} <= names
     with pytest.raises(SystemExit):
         cli_main(["run", "quick", "--p", "0"])
+
+
+def test_a_killed_pool_worker_is_retried_and_its_run_resumes(tmp_path):
+    import threading
+
+    import psutil
+
+    yaml_path = write_tiny_yaml(tmp_path, max_steps=300)
+    config = load_config(yaml_path)
+    expected = run_experiment(config, tmp_path / "reference", progress=False)
+    out = tmp_path / "pool"
+    outcome = {}
+
+    def run() -> None:
+        try:
+            outcome["trials"] = run_experiment(config, out, workers=2, progress=False)
+        except Exception as error:  # surfaced by the assertion below
+            outcome["error"] = error
+
+    thread = threading.Thread(target=run)
+    thread.start()
+    deadline = time.monotonic() + 120
+    killed = None
+    while killed is None and time.monotonic() < deadline:
+        if any(len(pd.read_parquet(p)) >= 1 for p in out.glob("p=*/run_*/trials.parquet")):
+            workers = [
+                child
+                for child in psutil.Process().children(recursive=True)
+                if "multiprocessing" in " ".join(child.cmdline())
+                and "resource_tracker" not in " ".join(child.cmdline())
+            ]
+            if workers:
+                workers[0].kill()
+                killed = workers[0].pid
+        time.sleep(0.05)
+    thread.join(timeout=300)
+    assert killed is not None, "no worker to kill"
+    assert "error" not in outcome, outcome.get("error")
+    pd.testing.assert_frame_equal(outcome["trials"][COMPARED], expected[COMPARED])
