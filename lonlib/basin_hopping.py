@@ -80,6 +80,23 @@ class RunState:
         """True once the run has met its tolerance or its budget."""
         return self.end_reason is not None
 
+    def record(
+        self, trial: Trial, optimum: LocalOptimum | None, config: BasinHoppingConfig
+    ) -> None:
+        """Algorithm 2's bookkeeping after one local search: the incumbent moves on
+        acceptance and the failure counter resets; T failures or the budget end the run.
+        ``optimum`` may be None when replaying stored trials (the caller loads the final
+        incumbent's parameters)."""
+        self.trials.append(trial)
+        if trial.accepted:
+            self.incumbent, self.incumbent_index, self.failures = optimum, trial.index, 0
+        else:
+            self.failures += 1
+        if self.failures >= config.tolerance:
+            self.end_reason = "tolerance"
+        elif len(self.trials) >= config.max_local_searches:
+            self.end_reason = "budget"
+
 
 def perturb(values: np.ndarray, strength: float, rng: np.random.Generator) -> np.ndarray:
     """Add U[-p, p] independently to every parameter (float32 in, float32 out)."""
@@ -122,15 +139,7 @@ def basin_hopping_steps(
         seconds = time.perf_counter() - start
         accepted = state.incumbent is None or optimum.fitness >= state.incumbent.fitness
         trial = Trial(index, parent, float(optimum.fitness), accepted, seconds, optimum.env_steps)
-        state.trials.append(trial)
-        if accepted:
-            state.incumbent, state.incumbent_index, state.failures = optimum, index, 0
-        else:
-            state.failures += 1
-        if state.failures >= config.tolerance:
-            state.end_reason = "tolerance"
-        elif len(state.trials) >= config.max_local_searches:
-            state.end_reason = "budget"
+        state.record(trial, optimum, config)
         yield state, trial, optimum
 
 

@@ -139,19 +139,10 @@ class SwingUpBalanceController:
         return np.clip((push / cfg.motor_gain + 2.0) / 4.0, 0.0, 1.0)
 
 
-def max_push_acceleration(config: PendulumConfig) -> float:
-    """Largest cart acceleration the motor gives a resting cart [m/s^2] (for reference)."""
-    push = 2.0 * config.motor_gain
-    if config.motor == "force":
-        return push / (config.cart_mass + config.pole_mass)
-    return push
-
-
 __all__ = [
     "DecodedSensors",
     "SwingUpBalanceController",
     "SwingUpGains",
     "decode_sensors",
-    "max_push_acceleration",
     "zero_controller",
 ]

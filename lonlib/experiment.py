@@ -206,7 +206,7 @@ def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> di
     """
     out = Path(out)
     bh = config.basin_hopping(p)
-    state = load_run_state(out, p, run, bh.tolerance, bh.max_local_searches)
+    state = load_run_state(out, p, run, bh)
     if state is None or not state.finished:
         search = ddpg_local_search(config.env, config.ddpg)
         start = initial_parameters(config, p, run)
@@ -292,7 +292,7 @@ def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]
     for p in config.perturbations:
         bh = config.basin_hopping(p)
         for run in range(config.runs):
-            state = load_run_state(out, p, run, bh.tolerance, bh.max_local_searches)
+            state = load_run_state(out, p, run, bh)
             if state is None or not state.finished:
                 pending.append((p, run))
     return pending
@@ -424,7 +424,7 @@ def status(out: str | Path) -> pd.DataFrame:
         finished = started = searches = 0
         best = float("nan")
         for run in range(config.runs):
-            state = load_run_state(out, p, run, bh.tolerance, bh.max_local_searches)
+            state = load_run_state(out, p, run, bh)
             if state is None:
                 continue
             searches += len(state.trials)

@@ -239,17 +239,12 @@ class PendulumConfig:
         return offsets * self.initial_spacing
 
 
-def actions_to_actuators(actions: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Single action conversion (paper §III-C): ``a`` in [0, 1] -> actuators ``(A0, A1)``."""
-    a = np.clip(actions, 0.0, 1.0)
-    a0 = np.where(a < 0.5, 254.0 * (0.5 - a), 0.0)
-    a1 = np.where(a < 0.5, 0.0, 254.0 * (a - 0.5))
-    return a0, a1
-
-
 def motor_command(actions: FloatArray) -> FloatArray:
-    """Motor command ``u = 2 (A0/127 - A1/127)`` in [-2, 2] (paper Table I); ``u > 0`` = left."""
-    # Equal to 2 - 4a, the composition of the action conversion and Table I's motor row.
+    """Motor command ``u = 2 (A0/127 - A1/127)`` in [-2, 2] (paper Table I); ``u > 0`` = left.
+
+    With the single action conversion (A0, A1) = (254 (0.5 - a), 0) for a < 0.5, else
+    (0, 254 (a - 0.5)), both branches reduce to ``u = 2 - 4a``.
+    """
     return 2.0 - 4.0 * np.clip(actions, 0.0, 1.0)
 
 

@@ -178,14 +178,9 @@ def recorded_entities(path: str | Path) -> dict[str, int]:
     counts: dict[str, int] = {}
     for chunk in RrdReader(str(path)).stream().to_chunks():
         entity = str(chunk.entity_path)
-        rows = 0 if _value(chunk.is_static) else int(_value(chunk.num_rows))
+        rows = 0 if chunk.is_static else int(chunk.num_rows)
         counts[entity] = counts.get(entity, 0) + rows
     return counts
-
-
-def _value(attribute):
-    """rerun exposes some chunk facts as properties and others as methods."""
-    return attribute() if callable(attribute) else attribute
 
 
 def show_inline(path: str | Path, width: int = 950, height: int = 520) -> None:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lonlib.basin_hopping import LocalOptimum, RunState, Trial
+from lonlib.basin_hopping import BasinHoppingConfig, LocalOptimum, RunState, Trial
 
 TRIAL_COLUMNS = ["p", "run", "index", "parent", "fitness", "accepted", "seconds", "env_steps"]
 
@@ -167,14 +167,15 @@ def read_optimum(path: Path) -> LocalOptimum:
         raise CorruptDataError(f"{path}: cannot read the stored optimum ({error})") from error
 
 
-def load_run_state(root: Path, p: float, run: int, tolerance: int, budget: int) -> RunState | None:
-    """Rebuild a run's :class:`RunState` from disk (None if it has not started)."""
+def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -> RunState | None:
+    """Rebuild a run's :class:`RunState` from disk (None if it has not started) by
+    replaying its stored trials through Algorithm 2's bookkeeping."""
     path = trials_path(root, p, run)
     if not path.exists():
         return None
-    table = read_trials(path)
-    trials = [
-        Trial(
+    state = RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
+    for r in read_trials(path).itertuples():
+        trial = Trial(
             int(r.index),
             int(r.parent),
             float(r.fitness),
@@ -182,23 +183,10 @@ def load_run_state(root: Path, p: float, run: int, tolerance: int, budget: int) 
             float(r.seconds),
             int(r.env_steps),
         )
-        for r in table.itertuples()
-    ]
-    incumbent_index, failures = -1, 0
-    for trial in trials:
-        if trial.accepted:
-            incumbent_index, failures = trial.index, 0
-        else:
-            failures += 1
-    incumbent = None
-    if incumbent_index >= 0:
-        incumbent = read_optimum(optimum_path(root, p, run, incumbent_index))
-    end_reason = None
-    if failures >= tolerance:
-        end_reason = "tolerance"
-    elif len(trials) >= budget:
-        end_reason = "budget"
-    return RunState(trials, incumbent, incumbent_index, failures, end_reason)
+        state.record(trial, None, config)
+    if state.incumbent_index >= 0:
+        state.incumbent = read_optimum(optimum_path(root, p, run, state.incumbent_index))
+    return state
 
 
 def read_experiment_trials(root: Path) -> pd.DataFrame:
