@@ -11,7 +11,7 @@ SCHEDULER ?=
 OUT       ?= data/$(basename $(notdir $(CONFIG)))
 PAPERMILL := $(BIN)/papermill --log-level WARNING --no-progress-bar
 
-.PHONY: help setup test bench lab lint format clean reproduce
+.PHONY: help setup test bench lab lint format clean reproduce mutants
 
 help:
 	@echo "make setup   create $(VENV) and install lonlib with its dev extra (idempotent)"
@@ -20,6 +20,7 @@ help:
 	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
 	@echo "             sample the LON for every p, analyse it and record optima (resumes)"
 	@echo "make lab     set up, then start JupyterLab in the project's environment"
+	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check"
 	@echo "make clean   remove $(VENV) and caches (never data/)"
 
@@ -38,6 +39,9 @@ setup: $(STAMP)
 
 test: setup
 	$(BIN)/python -m pytest -q
+
+mutants: setup
+	$(BIN)/python tests/mutants.py
 
 lint: setup
 	$(BIN)/ruff check .

@@ -39,13 +39,21 @@ class BasinHoppingConfig:
 
 @dataclass(frozen=True)
 class LocalOptimum:
-    """What a local search returns: fitness and the parameters reached."""
+    """What a local search returns: fitness and the parameters reached, and what it knows
+    of its start (NaN when a stand-in does not say)."""
 
     fitness: float
     theta: np.ndarray
     omega: np.ndarray
     env_steps: int = 0
     history: list[dict] | None = None  # per-episode training record, if the search keeps one
+    start_fitness: float = float("nan")  # fitness of the (perturbed) start parameters
+    stop_reason: str = ""  # why the local search stopped ("patience", "budget")
+
+    @property
+    def improved(self) -> bool:
+        """Did the local search return something strictly fitter than its start?"""
+        return bool(self.fitness > self.start_fitness)
 
 
 LocalSearch = Callable[[np.ndarray, np.ndarray, int], LocalOptimum]
@@ -63,6 +71,9 @@ class Trial:
     accepted: bool
     seconds: float
     env_steps: int
+    start_fitness: float = float("nan")  # fitness of the perturbed start, before training
+    improved: bool = False  # the local search returned something fitter than its start
+    stop_reason: str = ""  # why the local search stopped
 
 
 @dataclass
@@ -104,9 +115,24 @@ def perturb(values: np.ndarray, strength: float, rng: np.random.Generator) -> np
     return (values.astype(np.float64) + noise).astype(np.float32)
 
 
-def trial_seed(run_seed: int, index: int) -> int:
-    """Seed of local search ``index`` of a run: a pure function of the run's seed."""
-    return int(np.random.SeedSequence([run_seed, index]).generate_state(1)[0])
+@dataclass(frozen=True)
+class TrialSeeds:
+    """Independent random streams of one trial, spawned from ``(run seed, trial index)``:
+    the perturbation's, and the local search's (DDPG's warm-up, noise, sampling and start
+    noise). Greedy evaluations use the local search's own fixed stream (``eval_seed``) so
+    that fitness is a function of the parameters alone."""
+
+    perturbation: int
+    local_search: int
+
+
+def trial_seeds(run_seed: int, index: int) -> TrialSeeds:
+    """The random streams of trial ``index`` of a run: a pure function of both."""
+    perturbation, local = np.random.SeedSequence([run_seed, index]).spawn(2)
+    return TrialSeeds(
+        perturbation=int(perturbation.generate_state(1, np.uint64)[0]),
+        local_search=int(local.generate_state(1, np.uint64)[0]),
+    )
 
 
 def basin_hopping_steps(
@@ -119,26 +145,36 @@ def basin_hopping_steps(
     """Run Algorithm 2 one local search at a time, yielding after each.
 
     ``initial`` holds the random starting Actor and Critic. The perturbation of trial ``i``
-    and the local search's seed derive only from ``(run_seed, i)``, so a run resumed from a
-    stored ``state`` continues exactly as an uninterrupted one would. The caller stores each
-    yielded trial before asking for the next.
+    and the local search's seed are independent streams derived only from ``(run_seed, i)``,
+    so a run resumed from a stored ``state`` continues exactly as an uninterrupted one would.
+    The caller stores each yielded trial before asking for the next.
     """
     state = state or RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
     while not state.finished:
         index = len(state.trials)
-        seed = trial_seed(run_seed, index)
+        seeds = trial_seeds(run_seed, index)
         if state.incumbent is None:
             theta, omega, parent = initial[0], initial[1], -1
         else:
-            rng = np.random.default_rng(seed)
+            rng = np.random.default_rng(seeds.perturbation)
             theta = perturb(state.incumbent.theta, config.perturbation, rng)
             omega = perturb(state.incumbent.omega, config.perturbation, rng)
             parent = state.incumbent_index
         start = time.perf_counter()
-        optimum = local_search(theta, omega, seed)
+        optimum = local_search(theta, omega, seeds.local_search)
         seconds = time.perf_counter() - start
         accepted = state.incumbent is None or optimum.fitness >= state.incumbent.fitness
-        trial = Trial(index, parent, float(optimum.fitness), accepted, seconds, optimum.env_steps)
+        trial = Trial(
+            index=index,
+            parent=parent,
+            fitness=float(optimum.fitness),
+            accepted=accepted,
+            seconds=seconds,
+            env_steps=optimum.env_steps,
+            start_fitness=float(optimum.start_fitness),
+            improved=optimum.improved,
+            stop_reason=optimum.stop_reason,
+        )
         state.record(trial, optimum, config)
         yield state, trial, optimum
 
@@ -160,7 +196,14 @@ def ddpg_local_search(env_config, hp) -> LocalSearch:
 
     def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
         result = local_search(theta, omega, env_config, hp, seed)
-        history = [dataclasses.asdict(record) for record in result.history]
-        return LocalOptimum(result.fitness, result.theta, result.omega, result.env_steps, history)
+        return LocalOptimum(
+            fitness=result.fitness,
+            theta=result.theta,
+            omega=result.omega,
+            env_steps=result.env_steps,
+            history=[dataclasses.asdict(record) for record in result.history],
+            start_fitness=result.start_fitness,
+            stop_reason=result.stop_reason,
+        )
 
     return search

@@ -12,13 +12,21 @@ single-agent case of the same code. Read top to bottom, one environment step is:
    ``r + gamma (1 - terminated) Q'(s', mu'(s'))`` (no bootstrapping past a collision, tether
    or boundary end; the step limit bootstraps), actor up the critic's gradient, soft targets;
 4. when an agent's episode ends: greedy fitness (Algorithm 1, no noise) of its current
-   Actor; keep the parameters if it beats the best so far; reset its environment.
+   Actor; keep the parameters if they beat the best so far; reset its environment.
+
+What ``F`` returns (SPEC §4): the best greedy fitness among the policies DDPG **trained**
+and the parameters that scored it. The (perturbed) start is not a candidate, and neither is
+any policy evaluated before the first update (during the warm-up the Actor still *is* the
+start). ``count_start=True`` restores the older semantics (the start and warm-up
+evaluations count as seen) for comparison. The start's fitness is always measured and
+returned, with whether DDPG improved on it. A search always trains at least once
+(``warmup_steps <= max_steps``); if no training episode ended after the first update, the
+Actor at the stop is evaluated and returned (``final_evaluation``).
 
 An agent stops when its greedy fitness has not improved for ``patience_steps`` environment
-steps (never before ``min_steps``) or at ``max_steps``. It returns the best greedy fitness
-seen (the starting parameters included) and the parameters at that point. An agent that
-has stopped keeps riding along in the batched update until the last one stops (its result
-is frozen; the wasted work is the price of one batched matmul per layer).
+steps counted from the end of the warm-up (never before ``min_steps``) or at ``max_steps``.
+An agent that has stopped keeps riding along in the batched update until the last one stops
+(its result is frozen; the wasted work is the price of one batched matmul per layer).
 """
 
 from __future__ import annotations
@@ -32,8 +40,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from lonlib.nets import BatchedMLP, actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.nets import BatchedMLP, NetSpec, actor_spec, critic_spec, forward_numpy
+from lonlib.pendulum import CoupledPendulums, PendulumConfig, StepResult, evaluate
 from lonlib.validation import check_field_types, check_range
 
 
@@ -45,6 +53,16 @@ class DDPGConfig:
     ``plateau_tiebreak``: when the greedy fitness ties the best so far, a higher greedy
     reward return counts as progress (it keeps the parameters and resets the patience), so
     a search on a zero-fitness plateau is judged by whether it is still getting closer.
+
+    ``count_start``: the start parameters (and greedy evaluations during the warm-up, when
+    the Actor is still the start) are candidates for the returned optimum. Off by default:
+    a basin-hopping trial is then accepted only if learning produced the optimum.
+
+    ``eval_seed``: the random stream of the greedy evaluations' start noise (used only when
+    the environment's ``initial_noise`` > 0). It is the same for every policy and every
+    trial, so an optimum's fitness is a function of its parameters alone.
+
+    ``device`` and ``threads`` say where the computation runs, not what it computes.
     """
 
     buffer_size: int = 40_000
@@ -59,6 +77,7 @@ class DDPGConfig:
     patience_steps: int = 40_000
     eval_seed: int = 0
     plateau_tiebreak: bool = False
+    count_start: bool = False
     device: str = "cpu"
     threads: int = 1
 
@@ -72,6 +91,11 @@ class DDPGConfig:
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
         check_range("gamma", self.gamma, 0.0, 1.0)
         check_range("tau", self.tau, 0.0, 1.0, low_open=True)
+        if self.warmup_steps > self.max_steps:
+            raise ValueError(
+                f"warmup_steps must be <= max_steps ({self.max_steps}) so that DDPG trains "
+                f"at least once, got {self.warmup_steps!r}"
+            )
         if self.min_steps > self.max_steps:
             raise ValueError(
                 f"min_steps must be <= max_steps ({self.max_steps}), got {self.min_steps!r}"
@@ -104,11 +128,18 @@ class LocalSearchResult:
     fitness: float
     theta: np.ndarray  # Actor parameters at the best greedy fitness, float32 [P_actor]
     omega: np.ndarray  # Critic parameters at that point, float32 [P_critic]
-    initial_fitness: float
+    start_fitness: float  # greedy fitness of the (perturbed) start parameters
     env_steps: int
     seconds: float
     stop_reason: str  # "patience" or "budget"
+    updates: int = 0  # DDPG updates of this agent
+    final_evaluation: bool = False  # no training episode ended after the first update
     history: list[EpisodeRecord] = field(default_factory=list)
+
+    @property
+    def improved(self) -> bool:
+        """Did DDPG return something strictly fitter than its start?"""
+        return self.fitness > self.start_fitness
 
 
 def is_improvement(
@@ -156,7 +187,8 @@ def local_search_batch(
     """Train ``k = len(seeds)`` independent agents together; one result per agent.
 
     Agent ``i`` starts from ``thetas[i]``, ``omegas[i]`` with an empty replay buffer and
-    target networks copied from them, and draws every random number from
+    target networks copied from them, and draws every random number of its training
+    (warm-up actions, exploration noise, replay sampling, episode start noise) from
     ``np.random.default_rng(seeds[i])``: its result does not depend on the other agents.
     """
     k = len(seeds)
@@ -181,25 +213,25 @@ def local_search_batch(
 
     def greedy(flat_theta: np.ndarray) -> tuple[float, float]:
         """Greedy (noise-free) fitness and reward return of one Actor."""
-        policy = lambda obs: forward_numpy(a_spec, flat_theta, obs)  # noqa: E731
-        result = evaluate(policy, env_config, 1, hp.eval_seed)
-        return float(result.fitness[0]), float(result.episode_return[0])
+        return greedy_score(a_spec, flat_theta, env_config, hp.eval_seed)
 
-    scores = [greedy(thetas[i]) for i in range(k)]
-    best = [score[0] for score in scores]
+    start_scores = [greedy(thetas[i]) for i in range(k)]
+    no_candidate = (-np.inf, -np.inf)
+    scores = list(start_scores) if hp.count_start else [no_candidate] * k
     results = [
         LocalSearchResult(
-            fitness=best[i],
+            fitness=start_scores[i][0] if hp.count_start else -np.inf,
             theta=thetas[i].copy(),
             omega=omegas[i].copy(),
-            initial_fitness=best[i],
+            start_fitness=start_scores[i][0],
             env_steps=0,
             seconds=0.0,
             stop_reason="budget",
         )
         for i in range(k)
     ]
-    last_improvement = np.zeros(k, dtype=np.int64)
+    # The patience window opens when training starts (the first update).
+    last_improvement = np.full(k, hp.warmup_steps, dtype=np.int64)
     active = np.ones(k, dtype=bool)
 
     sim = CoupledPendulums(env_config, k)
@@ -210,7 +242,7 @@ def local_search_batch(
     losses: list[list[tuple[float, float]]] = [[] for _ in range(k)]
 
     bar = tqdm(total=hp.max_steps, desc=f"DDPG x{k}", disable=not progress, leave=False)
-    step = 0
+    step = updates = 0
     while active.any():
         # 1. act
         if step < hp.warmup_steps:
@@ -218,12 +250,11 @@ def local_search_batch(
         else:
             with torch.no_grad():
                 mu = actor(torch.as_tensor(obs, device=device)[:, None, :])[:, 0, :]
-            noise = np.stack([rng.normal(0.0, hp.noise_std, n) for rng in rngs])
-            actions = np.clip(mu.cpu().numpy().astype(np.float64) + noise, 0.0, 1.0)
+            actions = exploration_actions(mu.cpu().numpy().astype(np.float64), rngs, hp.noise_std)
         # 2. step and store
         outcome = sim.step(actions)
         next_obs = sim.observe().astype(np.float32)
-        replay.add(obs, actions, outcome.reward, next_obs, outcome.terminated)
+        replay.add_step(obs, actions, outcome, next_obs)
         episode_return += outcome.reward
         step += 1
         # 3. update
@@ -239,19 +270,20 @@ def local_search_batch(
                 critic_opt,
                 hp,
             )
+            updates += 1
             for i in np.flatnonzero(active):
                 losses[i].append((critic_loss[i], actor_loss[i]))
-        # 4. episode ends: greedy fitness, best parameters, reset
+        # 4. episode ends: greedy fitness of trained policies, best parameters, reset
         ended = outcome.terminated | outcome.truncated
         if ended.any():
+            candidate = hp.count_start or updates > 0
             flat_actor = actor.flat()
-            flat_critic = critic.flat() if (ended & active).any() else None
+            flat_critic = critic.flat() if (ended & active).any() and candidate else None
             for i in np.flatnonzero(ended & active):
-                score = greedy(flat_actor[i])
-                fitness = score[0]
-                if is_improvement(score, scores[i], hp.plateau_tiebreak):
+                score = greedy(flat_actor[i]) if candidate else (np.nan, np.nan)
+                if candidate and is_improvement(score, scores[i], hp.plateau_tiebreak):
                     scores[i] = score
-                    results[i].fitness = fitness
+                    results[i].fitness = score[0]
                     results[i].theta = flat_actor[i].copy()
                     results[i].omega = flat_critic[i].copy()
                     last_improvement[i] = step
@@ -262,7 +294,7 @@ def local_search_batch(
                         env_steps=step,
                         episode_return=float(episode_return[i]),
                         episode_length=int(sim.step_count[i]),
-                        greedy_fitness=fitness,
+                        greedy_fitness=score[0],
                         greedy_return=score[1],
                         critic_loss=float(np.mean(episode_losses[:, 0])),
                         actor_loss=float(np.mean(episode_losses[:, 1])),
@@ -279,9 +311,18 @@ def local_search_batch(
         # stopping rules
         stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)
         stop = active & (stale | (step >= hp.max_steps))
+        if stop.any():
+            flat_actor, flat_critic = actor.flat(), critic.flat()
         for i in np.flatnonzero(stop):
+            if scores[i] is no_candidate:  # no training episode ended: judge the Actor now
+                scores[i] = greedy(flat_actor[i])
+                results[i].fitness = scores[i][0]
+                results[i].theta = flat_actor[i].copy()
+                results[i].omega = flat_critic[i].copy()
+                results[i].final_evaluation = True
             results[i].stop_reason = "patience" if stale[i] else "budget"
             results[i].env_steps = step
+            results[i].updates = updates
             results[i].seconds = time.perf_counter() - start_time
         active &= ~stop
         if progress and step % 500 == 0:
@@ -289,6 +330,24 @@ def local_search_batch(
             bar.set_postfix(best=f"{max(r.fitness for r in results):.3f}", active=int(active.sum()))
     bar.close()
     return results
+
+
+def exploration_actions(
+    mu: np.ndarray, rngs: Sequence[np.random.Generator], noise_std: float
+) -> np.ndarray:
+    """The Actor's actions ``mu [k, n]`` plus N(0, noise_std) noise (a standard deviation)
+    from each agent's own stream, clipped to the action range [0, 1]."""
+    noise = np.stack([rng.normal(0.0, noise_std, mu.shape[1]) for rng in rngs])
+    return np.clip(mu + noise, 0.0, 1.0)
+
+
+def greedy_score(
+    spec: NetSpec, flat_theta: np.ndarray, env_config: PendulumConfig, eval_seed: int
+) -> tuple[float, float]:
+    """Greedy (noise-free) fitness (Algorithm 1) and reward return of one flat Actor."""
+    policy = lambda obs: forward_numpy(spec, flat_theta, obs)  # noqa: E731
+    result = evaluate(policy, env_config, 1, eval_seed)
+    return float(result.fitness[0]), float(result.episode_return[0])
 
 
 def _reset(sim: CoupledPendulums, rngs: list[np.random.Generator], mask: np.ndarray) -> None:
@@ -324,6 +383,14 @@ class ReplayBuffer:
         self.device = device
         self._row = np.zeros((agents, width), dtype=np.float32)
         self._offsets = torch.arange(agents, device=device)[:, None] * capacity
+
+    def add_step(
+        self, obs: np.ndarray, actions: np.ndarray, outcome: StepResult, next_obs: np.ndarray
+    ) -> None:
+        """Store one environment step of every agent. Only a true end of the task
+        (collision, tether, boundary) is stored as terminal; reaching the step limit is a
+        truncation, and the target still bootstraps from its next state."""
+        self.add(obs, actions, outcome.reward, next_obs, outcome.terminated)
 
     def add(
         self,

@@ -44,6 +44,7 @@ from lonlib.store import (
 )
 from lonlib.validation import check_field_types, check_range
 
+EXECUTION_ONLY_DDPG_FIELDS = ("device", "threads")  # where DDPG runs, not what it computes
 PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
 
 
@@ -122,11 +123,14 @@ class ExperimentConfig:
         return int(np.random.SeedSequence([self.seed, p_key, run]).generate_state(1)[0])
 
     def comparable(self) -> dict[str, Any]:
-        """Everything that must match to add runs or p values to an existing experiment."""
+        """Every setting that changes results: what must match to resume an experiment or
+        add runs or p values to it. Where it runs (DDPG ``device`` and ``threads``; workers
+        and scheduler are not configuration at all) and the note do not count."""
         out = self.to_dict()
-        out.pop("runs")
-        out.pop("perturbations")
-        out.pop("note")
+        for key in ("runs", "perturbations", "note"):
+            out.pop(key)
+        for key in EXECUTION_ONLY_DDPG_FIELDS:
+            out["ddpg"].pop(key)
         return out
 
 
@@ -269,7 +273,12 @@ def updated_manifest(config: ExperimentConfig, out: Path) -> dict[str, Any]:
         merged = dataclasses.replace(stored, runs=runs, perturbations=perturbations)
         manifest["config"] = merged.to_dict()
         manifest.setdefault("sessions", []).append(
-            {"started": now, "versions": _versions(), "git_commit": _git_commit()}
+            {
+                "started": now,
+                "versions": _versions(),
+                "git_commit": _git_commit(),
+                "execution": {k: getattr(config.ddpg, k) for k in EXECUTION_ONLY_DDPG_FIELDS},
+            }
         )
     else:
         manifest = {

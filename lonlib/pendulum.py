@@ -15,9 +15,10 @@ Coordinates and units (SI)
   right (+x), wrapped to ``[0, 2*pi)``: ``phi = 0`` upright, ``phi = pi`` hanging.
 * ``phi_dot`` angular velocity [rad/s].
 
-Per-cart dynamics: classic cart-pole in Florian's form (Barto et al. 1983; R. V. Florian,
-"Correct equations for the dynamics of the cart-pole system", 2007), uniform rod of mass
-``m``, half-length ``l``, cart mass ``M``, cart friction ``mu_c``, hinge friction ``mu_p``::
+Per-cart dynamics: classic cart-pole (Barto et al. 1983, with the rod equations as corrected
+by R. V. Florian, "Correct equations for the dynamics of the cart-pole system", 2007),
+uniform rod of mass ``m``, half-length ``l``, cart mass ``M``, hinge friction ``mu_p`` and
+Barto's Coulomb cart friction ``mu_c sgn(x_dot)`` (not Florian's normal-force form)::
 
     phi_ddot = (g sin(phi) + cos(phi) * (-F - m l phi_dot^2 sin(phi) + mu_c sgn(x_dot)) / (M + m)
                 - mu_p phi_dot / (m l))
@@ -35,14 +36,16 @@ Integration: ``substeps`` Euler steps per control step of ``dt`` seconds. The de
 **explicit Euler** (all derivatives from the old state), the spec's choice;
 ``integrator="semi-implicit"`` (symplectic Euler: velocities first, then positions with the
 new velocities) is the alternative. Know what the default does: at dt = 0.02 s explicit
-Euler feeds energy into a swinging rod (amplitude x ~1.003 per step, ~x20 over 2000 steps,
-like a hinge with slightly negative friction), so with 0.02 rad of start noise even a policy
+Euler feeds energy into a swinging rod (small-swing amplitude x sqrt(1 + w^2 dt^2) = x1.0032
+per step, about x100-x400 over a 2000-step episode, like a hinge with slightly negative
+friction), so with 0.02 rad of start noise even a policy
 that never pushes can swing a rod up (fitness 0.10 measured). We keep it because the
 learning problem depends on it: measured on two carts with the paper's DDPG, 3 of 3 seeds
 reached greedy fitness 0.23-0.28 under explicit Euler and 0 of 3 under semi-implicit Euler
 (README, "The integrator and learnability").
-The energy of one rod-and-cart (frictionless, no motor) is conserved by the continuous
-equations and is used by the tests::
+The energy and the horizontal momentum ``(M + m) x_dot + m l cos(phi) phi_dot`` of one
+rod-and-cart (frictionless, no motor) are conserved by the continuous equations and are used
+by the tests::
 
     E = 1/2 (M + m) x_dot^2 + m l cos(phi) x_dot phi_dot + 2/3 m l^2 phi_dot^2 + m g l cos(phi)
 

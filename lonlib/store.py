@@ -17,6 +17,7 @@ cannot be read raises :class:`CorruptDataError` naming it; nothing is ever delet
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import tempfile
@@ -28,7 +29,14 @@ import pandas as pd
 
 from lonlib.basin_hopping import BasinHoppingConfig, LocalOptimum, RunState, Trial
 
-TRIAL_COLUMNS = ["p", "run", "index", "parent", "fitness", "accepted", "seconds", "env_steps"]
+TRIAL_COLUMNS = [
+    "p",
+    "run",
+    *(f.name for f in dataclasses.fields(Trial)),
+]
+
+
+TRIAL_FIELDS = [f.name for f in dataclasses.fields(Trial)]
 
 
 class CorruptDataError(RuntimeError):
@@ -120,19 +128,7 @@ def save_step(
 
 def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:
     """Trials as a table with the run's coordinates."""
-    rows = [
-        {
-            "p": p,
-            "run": run,
-            "index": t.index,
-            "parent": t.parent,
-            "fitness": t.fitness,
-            "accepted": t.accepted,
-            "seconds": t.seconds,
-            "env_steps": t.env_steps,
-        }
-        for t in trials
-    ]
+    rows = [{"p": p, "run": run, **dataclasses.asdict(t)} for t in trials]
     return pd.DataFrame(rows, columns=TRIAL_COLUMNS).astype(
         {
             "run": "int64",
@@ -140,6 +136,9 @@ def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:
             "parent": "int64",
             "env_steps": "int64",
             "accepted": "bool",
+            "start_fitness": "float64",
+            "improved": "bool",
+            "stop_reason": "str",
         }
     )
 
@@ -174,15 +173,8 @@ def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -
     if not path.exists():
         return None
     state = RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
-    for r in read_trials(path).itertuples():
-        trial = Trial(
-            int(r.index),
-            int(r.parent),
-            float(r.fitness),
-            bool(r.accepted),
-            float(r.seconds),
-            int(r.env_steps),
-        )
+    for row in read_trials(path).to_dict("records"):
+        trial = Trial(**{name: row[name] for name in TRIAL_FIELDS})
         state.record(trial, None, config)
     if state.incumbent_index >= 0:
         state.incumbent = read_optimum(optimum_path(root, p, run, state.incumbent_index))

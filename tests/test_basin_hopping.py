@@ -10,7 +10,7 @@ from lonlib.basin_hopping import (
     basin_hopping,
     basin_hopping_steps,
     ddpg_local_search,
-    trial_seed,
+    trial_seeds,
 )
 from lonlib.ddpg import DDPGConfig
 from lonlib.nets import actor_spec, critic_spec
@@ -41,6 +41,48 @@ def test_equal_fitness_is_accepted_and_counter_resets():
     assert [t.parent for t in state.trials] == [-1, 0, 0, 2, 2]
 
 
+def test_a_better_optimum_is_accepted_and_a_worse_one_is_not():
+    search, _ = scripted([0.3, 0.31, 0.2999])
+    config = BasinHoppingConfig(tolerance=1)
+    state = basin_hopping(search, START, config, run_seed=0)
+    assert [t.accepted for t in state.trials] == [True, True, False]
+    assert state.incumbent_index == 1 and state.incumbent.fitness == 0.31
+
+
+def test_the_next_perturbation_starts_from_the_incumbent_not_the_last_trial():
+    search, calls = scripted([0.5, 0.1, 0.6, 0.6, 0.0, 0.0])
+    basin_hopping(search, START, BasinHoppingConfig(tolerance=2), run_seed=3)
+    # trial i returns its input + (i + 1): incumbents are trial 0 (+1), 2 (+4), 3 (+8)
+    for (theta, _, _), want in zip(calls[1:], [1, 1, 4, 8, 8], strict=True):
+        np.testing.assert_allclose(theta, START[0] + want, atol=5e-4)
+
+
+def test_trials_record_the_start_fitness_improvement_and_stop_reason():
+    def search(theta, omega, seed):
+        return LocalOptimum(0.4, theta, omega, 7, start_fitness=0.25, stop_reason="patience")
+
+    state = basin_hopping(search, START, BasinHoppingConfig(tolerance=1), run_seed=0)
+    trial = state.trials[0]
+    assert (trial.start_fitness, trial.improved, trial.stop_reason) == (0.25, True, "patience")
+    unimproved = LocalOptimum(0.25, START[0], START[1], start_fitness=0.25)
+    assert not unimproved.improved
+
+
+def test_perturbation_and_local_search_draw_from_independent_streams():
+    search, calls = scripted([0.5, 0.4, 0.4])
+    p = 1e-3
+    basin_hopping(search, START, BasinHoppingConfig(perturbation=p, tolerance=2), run_seed=4)
+    seeds = [trial_seeds(4, i) for i in range(3)]
+    assert [seed for _, _, seed in calls] == [s.local_search for s in seeds]
+    assert len({s.perturbation for s in seeds} | {s.local_search for s in seeds}) == 6
+    for (theta, _, seed), s in zip(calls[1:], seeds[1:], strict=True):
+        delta = theta.astype(np.float64) - (START[0] + 1)
+        same_stream = np.random.default_rng(seed).uniform(-p, p, size=delta.shape)
+        own_stream = np.random.default_rng(s.perturbation).uniform(-p, p, size=delta.shape)
+        np.testing.assert_allclose(delta, own_stream, atol=1e-6)
+        assert not np.allclose(delta, same_stream, atol=1e-6)
+
+
 def test_exactly_tolerance_failures_end_a_run():
     search, calls = scripted([0.5] + [0.1] * 10)
     state = basin_hopping(search, START, BasinHoppingConfig(tolerance=4), run_seed=0)
@@ -69,7 +111,7 @@ def test_perturbation_touches_every_parameter_within_p():
 
 def test_resuming_from_a_stored_state_continues_identically():
     fit = [0.2, 0.1, 0.3, 0.3, 0.1, 0.1, 0.1]
-    by_seed = {trial_seed(9, i): f for i, f in enumerate(fit)}
+    by_seed = {trial_seeds(9, i).local_search: f for i, f in enumerate(fit)}
 
     def pure(theta, omega, seed):  # a function of its inputs only, like a seeded DDPG
         return LocalOptimum(by_seed[seed], theta + 1, omega - 1)

@@ -342,3 +342,79 @@ def test_explicit_euler_swings_a_hanging_rod_up_and_semi_implicit_does_not(integ
 
 def test_default_integrator_is_the_specs_explicit_euler():
     assert PendulumConfig().integrator == "euler"
+
+
+def horizontal_momentum(cfg, sim):
+    """(M + m) x_dot + m l cos(phi) phi_dot of each cart and rod."""
+    m, l = cfg.pole_mass, cfg.pole_half_length
+    return (cfg.cart_mass + m) * sim.x_dot + m * l * np.cos(sim.phi) * sim.phi_dot
+
+
+@pytest.mark.parametrize("v0", [1.0, -1.0])
+def test_a_coasting_cart_slows_down_under_coulomb_friction(v0):
+    # Barto's cart friction mu_c sgn(x_dot) is the only horizontal force on an unpushed
+    # cart and rod: their momentum falls at exactly mu_c against the motion.
+    cfg = PendulumConfig(n_carts=1, cart_friction=0.05, hinge_friction=0.0, substeps=10)
+    sim = CoupledPendulums(cfg)
+    sim.x_dot[:] = v0
+    p0 = horizontal_momentum(cfg, sim)[0, 0]
+    for _ in range(50):
+        sim.step(np.full((1, 1), 0.5))
+    lost = p0 - horizontal_momentum(cfg, sim)[0, 0]
+    assert lost == pytest.approx(np.sign(v0) * 50 * cfg.dt * 0.05, rel=1e-3)
+    assert abs(sim.x_dot[0, 0]) < abs(v0)
+
+
+def momentum_drift(substeps: int, integrator: str) -> float:
+    """Largest change of the horizontal momentum (M + m) x_dot + m l cos(phi) phi_dot of a
+    free (frictionless, unpushed) cart and swinging rod over 500 steps."""
+    cfg = PendulumConfig(
+        n_carts=1,
+        substeps=substeps,
+        integrator=integrator,
+        track_half_length_base=100.0,
+        **FRICTIONLESS,
+    )
+    sim = CoupledPendulums(cfg)
+    sim.x_dot[:], sim.phi[:], sim.phi_dot[:] = 0.3, 2.0, 1.5
+    p0, drift = horizontal_momentum(cfg, sim), 0.0
+    for _ in range(500):
+        sim.step(np.full((1, 1), 0.5))
+        drift = max(drift, float(np.abs(horizontal_momentum(cfg, sim) - p0).max()))
+    return drift
+
+
+@pytest.mark.parametrize("integrator", ["euler", "semi-implicit"])
+def test_horizontal_momentum_is_conserved_up_to_the_integrators_error(integrator):
+    drifts = {s: momentum_drift(s, integrator) for s in (1, 10)}
+    assert drifts[1] < 0.05  # the rod's own momentum swings by ~0.15 kg m/s
+    assert drifts[10] < drifts[1] / 5
+
+
+@pytest.mark.parametrize("motor", ["force", "acceleration"])
+def test_a_hanging_rods_tip_lags_behind_an_accelerating_cart(motor):
+    cfg = PendulumConfig(n_carts=1, motor=motor, **FRICTIONLESS)
+    sim = CoupledPendulums(cfg)
+    for _ in range(10):
+        sim.step(np.ones((1, 1)))  # full push to the right
+    assert sim.x_dot[0, 0] > 0
+    assert np.sin(sim.phi[0, 0]) < -1e-3  # tip (x + l sin phi) behind the cart, to the left
+    assert sim.phi_dot[0, 0] > 0
+
+
+def test_a_free_rod_on_a_cart_at_constant_speed_keeps_its_energy_in_acceleration_mode():
+    cfg = PendulumConfig(
+        n_carts=1, motor="acceleration", integrator="semi-implicit", substeps=10, **FRICTIONLESS
+    )
+    m, l, g = cfg.pole_mass, cfg.pole_half_length, cfg.gravity
+    sim = CoupledPendulums(cfg)
+    sim.x_dot[:], sim.phi[:] = 0.5, 2.0
+
+    def rod_energy():
+        return (2 / 3) * m * l**2 * sim.phi_dot**2 + m * g * l * np.cos(sim.phi)
+
+    e0 = rod_energy()
+    for _ in range(300):
+        sim.step(np.full((1, 1), 0.5))  # zero command: zero acceleration
+        assert abs(rod_energy() - e0)[0, 0] < 5e-3 * m * g * l  # bounded, symplectic
+    assert sim.x_dot[0, 0] == 0.5

@@ -1,0 +1,343 @@
+"""Hand-written mutation testing: every mutant below changes a result-changing line of the
+DDPG local search, Algorithm 2 or the physics, and ``make test`` must kill it.
+
+``make mutants`` copies the package and the tests into a temporary folder, applies one
+mutant at a time there (the working tree is never touched), runs the test files that guard
+that module, and reports each mutant as killed or SURVIVED; it exits non-zero if any
+survived or if a mutant's text no longer occurs exactly once (keep the list in step with
+the code). Add a mutant whenever you add a line whose change would alter results.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class Mutant:
+    """Replace ``old`` (which must occur exactly once) by ``new`` in ``path``."""
+
+    path: str
+    old: str
+    new: str
+    why: str
+
+
+DDPG, BH, SIM = "lonlib/ddpg.py", "lonlib/basin_hopping.py", "lonlib/pendulum.py"
+GUARDS = {
+    DDPG: ["tests/test_ddpg.py"],
+    BH: ["tests/test_basin_hopping.py"],
+    SIM: ["tests/test_pendulum.py"],
+}
+
+MUTANTS = [
+    # --- DDPG: the update
+    Mutant(DDPG, "actor_loss = -critic(", "actor_loss = critic(", "actor descends Q"),
+    Mutant(
+        DDPG,
+        "torch._foreach_lerp_(target_net.tensors, net.tensors, hp.tau)",
+        "torch._foreach_lerp_(target_net.tensors, net.tensors, 0.0)",
+        "no soft target update",
+    ),
+    Mutant(
+        DDPG,
+        "torch._foreach_lerp_(target_net.tensors, net.tensors, hp.tau)",
+        "torch._foreach_lerp_(target_net.tensors, net.tensors, 1.0 - hp.tau)",
+        "tau and 1 - tau swapped",
+    ),
+    Mutant(
+        DDPG,
+        "target = rewards + hp.gamma * not_done * next_q",
+        "target = rewards + hp.gamma * next_q",
+        "bootstraps past a termination",
+    ),
+    Mutant(
+        DDPG,
+        "target = rewards + hp.gamma * not_done * next_q",
+        "target = rewards + not_done * next_q",
+        "gamma ignored",
+    ),
+    Mutant(
+        DDPG,
+        "next_q = critic_target(torch.cat([next_obs, actor_target(next_obs)], dim=2))",
+        "next_q = critic(torch.cat([next_obs, actor(next_obs)], dim=2))",
+        "online nets instead of targets in the critic target",
+    ),
+    Mutant(
+        DDPG,
+        "critic_loss = ((q - target) ** 2).mean(dim=(1, 2))",
+        "critic_loss = (q - target).abs().mean(dim=(1, 2))",
+        "critic loss is not the squared error",
+    ),
+    # --- DDPG: replay and exploration
+    Mutant(
+        DDPG,
+        "self.add(obs, actions, outcome.reward, next_obs, outcome.terminated)",
+        "self.add(obs, actions, outcome.reward, next_obs, outcome.terminated | outcome.truncated)",
+        "truncations stored as terminations",
+    ),
+    Mutant(DDPG, "row[:, -1] = ~terminated", "row[:, -1] = terminated", "not_done inverted"),
+    Mutant(
+        DDPG,
+        "row[:, o + a + 1 : 2 * o + a + 1] = next_obs",
+        "row[:, o + a + 1 : 2 * o + a + 1] = obs",
+        "next state not stored",
+    ),
+    Mutant(
+        DDPG,
+        "noise = np.stack([rng.normal(0.0, noise_std, mu.shape[1]) for rng in rngs])",
+        "noise = np.stack([rng.normal(0.0, noise_std**2, mu.shape[1]) for rng in rngs])",
+        "noise_std read as a variance",
+    ),
+    Mutant(
+        DDPG,
+        "return np.clip(mu + noise, 0.0, 1.0)",
+        "return mu + noise",
+        "actions not clipped",
+    ),
+    # --- DDPG: what F returns
+    Mutant(
+        DDPG,
+        "                    results[i].theta = flat_actor[i].copy()\n"
+        "                    results[i].omega = flat_critic[i].copy()\n"
+        "                    last_improvement[i] = step",
+        "                    results[i].theta = thetas[i].copy()\n"
+        "                    results[i].omega = flat_critic[i].copy()\n"
+        "                    last_improvement[i] = step",
+        "start Actor returned with the trained fitness",
+    ),
+    Mutant(
+        DDPG,
+        "                    results[i].theta = flat_actor[i].copy()\n"
+        "                    results[i].omega = flat_critic[i].copy()\n"
+        "                    last_improvement[i] = step",
+        "                    results[i].theta = flat_actor[i].copy()\n"
+        "                    results[i].omega = omegas[i].copy()\n"
+        "                    last_improvement[i] = step",
+        "start Critic returned",
+    ),
+    Mutant(DDPG, "count_start: bool = False", "count_start: bool = True", "start counted"),
+    Mutant(
+        DDPG,
+        "candidate = hp.count_start or updates > 0",
+        "candidate = True",
+        "warm-up evaluations counted",
+    ),
+    Mutant(
+        DDPG,
+        "scores = list(start_scores) if hp.count_start else [no_candidate] * k",
+        "scores = list(start_scores)",
+        "start's score kept as the bar to beat",
+    ),
+    Mutant(
+        DDPG,
+        "        return candidate[0] > incumbent[0]",
+        "        return candidate[0] >= incumbent[0]",
+        "ties replace the best",
+    ),
+    Mutant(
+        DDPG,
+        "if step >= hp.warmup_steps:\n            indices",
+        "if step > hp.warmup_steps:\n            indices",
+        "one update fewer",
+    ),
+    # --- Algorithm 2
+    Mutant(
+        BH,
+        "optimum.fitness >= state.incumbent.fitness",
+        "optimum.fitness > state.incumbent.fitness",
+        "equal fitness rejected",
+    ),
+    Mutant(
+        BH,
+        "self.incumbent, self.incumbent_index, self.failures = optimum, trial.index, 0",
+        "self.incumbent, self.incumbent_index = optimum, trial.index",
+        "counter not reset on acceptance",
+    ),
+    Mutant(
+        BH,
+        "if self.failures >= config.tolerance:",
+        "if self.failures > config.tolerance:",
+        "T + 1 failures end a run",
+    ),
+    Mutant(
+        BH,
+        "elif len(self.trials) >= config.max_local_searches:",
+        "elif len(self.trials) > config.max_local_searches:",
+        "budget off by one",
+    ),
+    Mutant(
+        BH,
+        "noise = rng.uniform(-strength, strength, size=values.shape)",
+        "noise = rng.uniform(0.0, strength, size=values.shape)",
+        "one-sided perturbation",
+    ),
+    Mutant(
+        BH,
+        "omega = perturb(state.incumbent.omega, config.perturbation, rng)",
+        "omega = state.incumbent.omega",
+        "critic not perturbed",
+    ),
+    Mutant(
+        BH,
+        "rng = np.random.default_rng(seeds.perturbation)",
+        "rng = np.random.default_rng(seeds.local_search)",
+        "perturbation shares DDPG's stream",
+    ),
+    Mutant(BH, "parent = state.incumbent_index", "parent = index - 1", "wrong parent"),
+    Mutant(
+        BH,
+        "return bool(self.fitness > self.start_fitness)",
+        "return bool(self.fitness >= self.start_fitness)",
+        "equal counted as improved",
+    ),
+    # --- physics
+    Mutant(
+        SIM,
+        "friction = cfg.cart_friction * np.sign(x_dot)",
+        "friction = -cfg.cart_friction * np.sign(x_dot)",
+        "cart friction pushes",
+    ),
+    Mutant(
+        SIM,
+        "temp = (-push - m * l * phi_dot**2 * sin + friction) / total",
+        "temp = (-push + m * l * phi_dot**2 * sin + friction) / total",
+        "centripetal term sign",
+    ),
+    Mutant(
+        SIM,
+        "phi_ddot = (g * sin + cos * temp - cfg.hinge_friction",
+        "phi_ddot = (-g * sin + cos * temp - cfg.hinge_friction",
+        "gravity sign",
+    ),
+    Mutant(
+        SIM,
+        "phi_ddot = (g * sin + cos * temp - cfg.hinge_friction",
+        "phi_ddot = (g * sin - cos * temp - cfg.hinge_friction",
+        "cart-to-rod coupling sign",
+    ),
+    Mutant(
+        SIM,
+        "- cfg.hinge_friction * phi_dot / (m * l)) / (",
+        "+ cfg.hinge_friction * phi_dot / (m * l)) / (",
+        "hinge friction pushes",
+    ),
+    Mutant(
+        SIM,
+        "l * (4.0 / 3.0 - m * cos**2 / total)",
+        "l * (4.0 / 3.0 + m * cos**2 / total)",
+        "effective inertia term",
+    ),
+    Mutant(
+        SIM,
+        "x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total",
+        "x_ddot = (push + m * l * (phi_dot**2 * sin + phi_ddot * cos) - friction) / total",
+        "rod-to-cart reaction sign",
+    ),
+    Mutant(
+        SIM,
+        "x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total",
+        "x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) + friction) / total",
+        "friction on the cart pushes",
+    ),
+    Mutant(
+        SIM,
+        "phi_ddot = 0.75 / l * (g * sin - x_ddot * cos)",
+        "phi_ddot = 0.75 / l * (g * sin + x_ddot * cos)",
+        "acceleration mode: coupling sign",
+    ),
+    Mutant(
+        SIM,
+        "phi_ddot = 0.75 / l * (g * sin - x_ddot * cos)",
+        "phi_ddot = 0.75 / l * (-g * sin - x_ddot * cos)",
+        "acceleration mode: gravity sign",
+    ),
+    Mutant(
+        SIM,
+        "push = -cfg.motor_gain * motor_command(actions)",
+        "push = cfg.motor_gain * motor_command(actions)",
+        "motor direction",
+    ),
+    Mutant(SIM, "h = cfg.dt / cfg.substeps", "h = cfg.dt", "substeps ignored"),
+    Mutant(
+        SIM,
+        "                x_dot, phi_dot = x_dot + h * x_ddot, phi_dot + h * phi_ddot\n"
+        "                x, phi = x + h * x_dot, phi + h * phi_dot",
+        "                x, phi = x + h * x_dot, phi + h * phi_dot\n"
+        "                x_dot, phi_dot = x_dot + h * x_ddot, phi_dot + h * phi_ddot",
+        "semi-implicit integrator made explicit",
+    ),
+    Mutant(
+        SIM,
+        "upright_each = cos > self._cos_upright",
+        "upright_each = cos < self._cos_upright",
+        "upright test inverted",
+    ),
+    Mutant(SIM, "upright *= running", "upright *= 1.0", "ended episodes keep scoring"),
+    Mutant(
+        SIM,
+        "reward = 0.5 * (1.0 + cos).mean(axis=1) + cfg.termination_penalty * terminated",
+        "reward = 0.5 * (1.0 + cos).mean(axis=1) + cfg.termination_penalty * truncated",
+        "penalty on truncation",
+    ),
+    Mutant(
+        SIM,
+        "reason = np.where((gaps > cfg.tether_length).any(axis=1), EndReason.TETHER, reason)",
+        "reason = np.where((gaps > 2 * cfg.tether_length).any(axis=1), EndReason.TETHER, reason)",
+        "tether rule",
+    ),
+]
+
+
+def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
+    """Apply one mutant inside ``workdir``, run its guard tests, restore; return the outcome."""
+    target = workdir / mutant.path
+    original = target.read_text()
+    if original.count(mutant.old) != 1:
+        return "STALE (text not found exactly once)", 0.0
+    target.write_text(original.replace(mutant.old, mutant.new))
+    start = time.perf_counter()
+    try:
+        proc = subprocess.run(
+            [python, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *GUARDS[mutant.path]],
+            cwd=workdir,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        outcome = "killed" if proc.returncode != 0 else "SURVIVED"
+    except subprocess.TimeoutExpired:
+        outcome = "killed (timeout)"
+    finally:
+        target.write_text(original)
+    return outcome, time.perf_counter() - start
+
+
+def main(argv: list[str]) -> int:
+    """Run every mutant (or those whose description contains ``argv[0]``)."""
+    selected = [m for m in MUTANTS if not argv or argv[0] in m.why]
+    survivors = 0
+    with tempfile.TemporaryDirectory(prefix="lonlib-mutants-") as tmp:
+        workdir = Path(tmp)
+        shutil.copytree(ROOT / "lonlib", workdir / "lonlib")
+        shutil.copytree(ROOT / "tests", workdir / "tests")
+        shutil.copy(ROOT / "pyproject.toml", workdir)
+        for number, mutant in enumerate(selected, 1):
+            outcome, seconds = run_mutant(mutant, workdir, sys.executable)
+            survivors += not outcome.startswith("killed")
+            where = f"{mutant.path}: {mutant.why}"
+            print(f"{number:2d}/{len(selected)} {outcome:9s} {seconds:5.1f} s  {where}", flush=True)
+    print(f"{len(selected) - survivors} of {len(selected)} mutants killed")
+    return 1 if survivors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
