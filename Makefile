@@ -41,7 +41,7 @@ test: setup
 	$(BIN)/python -m pytest -q
 
 mutants: setup
-	$(BIN)/python tests/mutants.py
+	$(BIN)/python tests/mutants.py --jobs $(or $(JOBS),2)
 
 lint: setup
 	$(BIN)/ruff check .

@@ -1,20 +1,23 @@
 """Hand-written mutation testing: every mutant below changes a result-changing line of the
 DDPG local search, Algorithm 2 or the physics, and ``make test`` must kill it.
 
-``make mutants`` copies the package and the tests into a temporary folder, applies one
-mutant at a time there (the working tree is never touched), runs the test files that guard
-that module, and reports each mutant as killed or SURVIVED; it exits non-zero if any
-survived or if a mutant's text no longer occurs exactly once (keep the list in step with
-the code). Add a mutant whenever you add a line whose change would alter results.
+``make mutants`` copies the package and the tests into temporary folders and applies one
+mutant at a time to a copy (the working tree is never touched; ``--jobs N`` runs N copies
+at once), runs the test files that guard that module, and reports each mutant as killed or
+SURVIVED; it exits non-zero if any survived or if a mutant's text no longer occurs exactly
+once (keep the list in step with the code). Add a mutant whenever you add a line whose
+change would alter results.
 """
 
 from __future__ import annotations
 
+import queue
 import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -322,19 +325,40 @@ def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
 
 
 def main(argv: list[str]) -> int:
-    """Run every mutant (or those whose description contains ``argv[0]``)."""
+    """Run every mutant (``--jobs N`` at a time; a word filters by description)."""
+    jobs = 1
+    if "--jobs" in argv:
+        at = argv.index("--jobs")
+        jobs = int(argv[at + 1])
+        argv = argv[:at] + argv[at + 2 :]
     selected = [m for m in MUTANTS if not argv or argv[0] in m.why]
-    survivors = 0
     with tempfile.TemporaryDirectory(prefix="lonlib-mutants-") as tmp:
-        workdir = Path(tmp)
-        shutil.copytree(ROOT / "lonlib", workdir / "lonlib")
-        shutil.copytree(ROOT / "tests", workdir / "tests")
-        shutil.copy(ROOT / "pyproject.toml", workdir)
-        for number, mutant in enumerate(selected, 1):
-            outcome, seconds = run_mutant(mutant, workdir, sys.executable)
-            survivors += not outcome.startswith("killed")
-            where = f"{mutant.path}: {mutant.why}"
-            print(f"{number:2d}/{len(selected)} {outcome:9s} {seconds:5.1f} s  {where}", flush=True)
+        free: queue.Queue[Path] = queue.Queue()
+        for slot in range(jobs):
+            workdir = Path(tmp) / str(slot)
+            shutil.copytree(ROOT / "lonlib", workdir / "lonlib")
+            shutil.copytree(ROOT / "tests", workdir / "tests")
+            shutil.copy(ROOT / "pyproject.toml", workdir)
+            free.put(workdir)
+
+        def one(mutant: Mutant) -> tuple[str, float]:
+            workdir = free.get()
+            try:
+                return run_mutant(mutant, workdir, sys.executable)
+            finally:
+                free.put(workdir)
+
+        survivors = 0
+        with ThreadPoolExecutor(jobs) as pool:
+            for number, (mutant, (outcome, seconds)) in enumerate(
+                zip(selected, pool.map(one, selected), strict=True), 1
+            ):
+                survivors += not outcome.startswith("killed")
+                where = f"{mutant.path}: {mutant.why}"
+                print(
+                    f"{number:2d}/{len(selected)} {outcome:9s} {seconds:5.1f} s  {where}",
+                    flush=True,
+                )
     print(f"{len(selected) - survivors} of {len(selected)} mutants killed")
     return 1 if survivors else 0
 
