@@ -49,6 +49,7 @@ class LocalOptimum:
     history: list[dict] | None = None  # per-episode training record, if the search keeps one
     start_fitness: float = float("nan")  # fitness of the (perturbed) start parameters
     stop_reason: str = ""  # why the local search stopped ("patience", "budget")
+    behaviour: dict | None = None  # flat behaviour descriptor columns and label, if described
 
     @property
     def improved(self) -> bool:
@@ -74,6 +75,7 @@ class Trial:
     start_fitness: float = float("nan")  # fitness of the perturbed start, before training
     improved: bool = False  # the local search returned something fitter than its start
     stop_reason: str = ""  # why the local search stopped
+    behaviour: dict = dataclasses.field(default_factory=dict)  # lonlib.behaviour columns
 
 
 @dataclass
@@ -174,6 +176,7 @@ def basin_hopping_steps(
             start_fitness=float(optimum.start_fitness),
             improved=optimum.improved,
             stop_reason=optimum.stop_reason,
+            behaviour=dict(optimum.behaviour or {}),
         )
         state.record(trial, optimum, config)
         yield state, trial, optimum
@@ -190,12 +193,18 @@ def basin_hopping(
     return state
 
 
-def ddpg_local_search(env_config, hp) -> LocalSearch:
-    """The paper's ``F``: the DDPG local search bound to an environment and ``h``."""
+def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSearch:
+    """The paper's ``F``: the DDPG local search bound to an environment and ``h``. With
+    ``describe_optima`` every optimum also gets its behaviour descriptor and label
+    (:mod:`lonlib.behaviour`) from one greedy rollout plus a batch of perturbed starts."""
+    from lonlib.behaviour import describe_columns
     from lonlib.ddpg import local_search
 
     def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
         result = local_search(theta, omega, env_config, hp, seed)
+        behaviour = (
+            describe_columns(result.theta, env_config, hp.eval_seed) if describe_optima else None
+        )
         return LocalOptimum(
             fitness=result.fitness,
             theta=result.theta,
@@ -204,6 +213,7 @@ def ddpg_local_search(env_config, hp) -> LocalSearch:
             history=[dataclasses.asdict(record) for record in result.history],
             start_fitness=result.start_fitness,
             stop_reason=result.stop_reason,
+            behaviour=behaviour,
         )
 
     return search

@@ -29,14 +29,8 @@ import pandas as pd
 
 from lonlib.basin_hopping import BasinHoppingConfig, LocalOptimum, RunState, Trial
 
-TRIAL_COLUMNS = [
-    "p",
-    "run",
-    *(f.name for f in dataclasses.fields(Trial)),
-]
-
-
-TRIAL_FIELDS = [f.name for f in dataclasses.fields(Trial)]
+TRIAL_FIELDS = [f.name for f in dataclasses.fields(Trial) if f.name != "behaviour"]
+TRIAL_COLUMNS = ["p", "run", *TRIAL_FIELDS]  # then the behaviour columns (b_*, label), if any
 
 
 class CorruptDataError(RuntimeError):
@@ -128,8 +122,12 @@ def save_step(
 
 def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:
     """Trials as a table with the run's coordinates."""
-    rows = [{"p": p, "run": run, **dataclasses.asdict(t)} for t in trials]
-    return pd.DataFrame(rows, columns=TRIAL_COLUMNS).astype(
+    rows = [
+        {"p": p, "run": run, **{name: getattr(t, name) for name in TRIAL_FIELDS}, **t.behaviour}
+        for t in trials
+    ]
+    behaviour = list(dict.fromkeys(key for t in trials for key in t.behaviour))
+    return pd.DataFrame(rows, columns=TRIAL_COLUMNS + behaviour).astype(
         {
             "run": "int64",
             "index": "int64",
@@ -174,7 +172,8 @@ def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -
         return None
     state = RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
     for row in read_trials(path).to_dict("records"):
-        trial = Trial(**{name: row[name] for name in TRIAL_FIELDS})
+        behaviour = {k: v for k, v in row.items() if k.startswith("b_") or k == "label"}
+        trial = Trial(**{name: row[name] for name in TRIAL_FIELDS}, behaviour=behaviour)
         state.record(trial, None, config)
     if state.incumbent_index >= 0:
         state.incumbent = read_optimum(optimum_path(root, p, run, state.incumbent_index))

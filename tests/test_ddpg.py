@@ -52,61 +52,6 @@ def test_invalid_hyperparameters_are_refused_by_name(field, value):
         DDPGConfig(**{field: value})
 
 
-def test_nan_parameters_are_refused_before_training():
-    theta, omega = initial(2, 1)
-    theta[0, 5] = np.nan
-    with pytest.raises(ValueError, match="theta"):
-        local_search(theta[0], omega[0], PendulumConfig(), DDPGConfig(**SMALL), seed=0)
-
-
-def test_three_agents_together_equal_each_alone():
-    env = PendulumConfig(n_carts=2, steps=100, initial_noise=0.02)
-    hp = DDPGConfig(max_steps=400, patience_steps=10**6, **SMALL)  # 300 updates each
-    thetas, omegas = initial(2, 3)
-    together = local_search_batch(thetas, omegas, env, hp, seeds=[5, 6, 7])
-    for i, seed in enumerate([5, 6, 7]):
-        alone = local_search(thetas[i], omegas[i], env, hp, seed=seed)
-        assert len(alone.history) == len(together[i].history)
-        got = [h.episode_return for h in together[i].history]
-        want = [h.episode_return for h in alone.history]
-        np.testing.assert_allclose(got, want, atol=1e-3)
-        np.testing.assert_allclose(together[i].theta, alone.theta, atol=1e-4)
-        np.testing.assert_allclose(together[i].omega, alone.omega, atol=1e-4)
-        assert together[i].fitness == pytest.approx(alone.fitness, abs=1e-9)
-
-
-def test_same_seed_same_result_and_history_is_complete():
-    env = PendulumConfig(n_carts=1, steps=60)
-    hp = DDPGConfig(max_steps=300, patience_steps=10**6, **SMALL)
-    theta, omega = initial(1, 1)
-    a = local_search(theta[0], omega[0], env, hp, seed=3)
-    b = local_search(theta[0], omega[0], env, hp, seed=3)
-    np.testing.assert_array_equal(a.theta, b.theta)
-    assert [h.episode_return for h in a.history] == [h.episode_return for h in b.history]
-    assert a.env_steps == 300 and a.stop_reason == "budget"
-    assert a.history[-1].env_steps <= 300
-    assert all(np.isnan(h.critic_loss) for h in a.history if h.env_steps < 100)
-    assert all(np.isfinite(h.critic_loss) for h in a.history if h.env_steps > 160)
-    assert all(np.isnan(h.greedy_fitness) for h in a.history if h.env_steps < 100)
-
-
-def test_patience_stops_a_search_that_does_not_improve():
-    env = PendulumConfig(n_carts=1, steps=50)
-    hp = DDPGConfig(max_steps=5000, patience_steps=200, plateau_tiebreak=False, **SMALL)
-    theta, omega = initial(1, 1)
-    result = local_search(theta[0], omega[0], env, hp, seed=0)
-    assert result.stop_reason == "patience"
-    assert result.env_steps < 5000
-
-
-def test_plateau_tiebreak_counts_return_progress_only_on_equal_fitness():
-    assert is_improvement((0.2, -9.0), (0.1, 50.0), plateau_tiebreak=True)
-    assert not is_improvement((0.1, 60.0), (0.2, 0.0), plateau_tiebreak=True)
-    assert is_improvement((0.0, 3.0), (0.0, 2.0), plateau_tiebreak=True)
-    assert not is_improvement((0.0, 3.0), (0.0, 2.0), plateau_tiebreak=False)
-    assert not is_improvement((0.0, 2.0), (0.0, 2.0), plateau_tiebreak=True)
-
-
 # ------------------------------------------------------------------ one update
 def random_batches(n_carts, k, size, updates, done_share, seed=0):
     """``updates`` batches of ``[k, size, ...]`` transitions; ``done_share`` of them terminal."""
@@ -212,6 +157,15 @@ def test_only_a_true_end_is_stored_as_terminal_and_truncation_bootstraps():
     np.testing.assert_allclose(a[:, 0, 0], 0.7, rtol=1e-6)
 
 
+def test_exploration_noise_has_the_configured_standard_deviation_and_is_clipped():
+    rngs = [np.random.default_rng(i) for i in range(4000)]
+    actions = exploration_actions(np.full((4000, 2), 0.5), rngs, 0.1)
+    assert np.std(actions - 0.5) == pytest.approx(0.1, rel=0.05)
+    assert abs(np.mean(actions - 0.5)) < 0.01
+    edge = exploration_actions(np.full((4000, 1), 0.99), rngs, 0.1)
+    assert edge.max() == 1.0 and (edge <= 1.0).all() and (edge < 0.99).any()
+
+
 # ------------------------------------------------------------------ what F returns
 def upright_hold_start(n_carts=1, seed=0):
     """A start whose Actor outputs exactly 0.5 (no push): with the rod upright at rest it
@@ -253,6 +207,61 @@ def test_a_search_with_no_finished_training_episode_returns_the_trained_actor():
     assert result.history == [] or all(h.env_steps < 100 for h in result.history)
     assert not np.array_equal(result.theta, theta)
     assert greedy_score(actor_spec(1), result.theta, env, hp.eval_seed)[0] == result.fitness
+
+
+def test_nan_parameters_are_refused_before_training():
+    theta, omega = initial(2, 1)
+    theta[0, 5] = np.nan
+    with pytest.raises(ValueError, match="theta"):
+        local_search(theta[0], omega[0], PendulumConfig(), DDPGConfig(**SMALL), seed=0)
+
+
+def test_three_agents_together_equal_each_alone():
+    env = PendulumConfig(n_carts=2, steps=100, initial_noise=0.02)
+    hp = DDPGConfig(max_steps=400, patience_steps=10**6, **SMALL)  # 300 updates each
+    thetas, omegas = initial(2, 3)
+    together = local_search_batch(thetas, omegas, env, hp, seeds=[5, 6, 7])
+    for i, seed in enumerate([5, 6, 7]):
+        alone = local_search(thetas[i], omegas[i], env, hp, seed=seed)
+        assert len(alone.history) == len(together[i].history)
+        got = [h.episode_return for h in together[i].history]
+        want = [h.episode_return for h in alone.history]
+        np.testing.assert_allclose(got, want, atol=1e-3)
+        np.testing.assert_allclose(together[i].theta, alone.theta, atol=1e-4)
+        np.testing.assert_allclose(together[i].omega, alone.omega, atol=1e-4)
+        assert together[i].fitness == pytest.approx(alone.fitness, abs=1e-9)
+
+
+def test_same_seed_same_result_and_history_is_complete():
+    env = PendulumConfig(n_carts=1, steps=60)
+    hp = DDPGConfig(max_steps=300, patience_steps=10**6, **SMALL)
+    theta, omega = initial(1, 1)
+    a = local_search(theta[0], omega[0], env, hp, seed=3)
+    b = local_search(theta[0], omega[0], env, hp, seed=3)
+    np.testing.assert_array_equal(a.theta, b.theta)
+    assert [h.episode_return for h in a.history] == [h.episode_return for h in b.history]
+    assert a.env_steps == 300 and a.stop_reason == "budget"
+    assert a.history[-1].env_steps <= 300
+    assert all(np.isnan(h.critic_loss) for h in a.history if h.env_steps < 100)
+    assert all(np.isfinite(h.critic_loss) for h in a.history if h.env_steps > 160)
+    assert all(np.isnan(h.greedy_fitness) for h in a.history if h.env_steps < 100)
+
+
+def test_patience_stops_a_search_that_does_not_improve():
+    env = PendulumConfig(n_carts=1, steps=50)
+    hp = DDPGConfig(max_steps=5000, patience_steps=200, plateau_tiebreak=False, **SMALL)
+    theta, omega = initial(1, 1)
+    result = local_search(theta[0], omega[0], env, hp, seed=0)
+    assert result.stop_reason == "patience"
+    assert result.env_steps < 5000
+
+
+def test_plateau_tiebreak_counts_return_progress_only_on_equal_fitness():
+    assert is_improvement((0.2, -9.0), (0.1, 50.0), plateau_tiebreak=True)
+    assert not is_improvement((0.1, 60.0), (0.2, 0.0), plateau_tiebreak=True)
+    assert is_improvement((0.0, 3.0), (0.0, 2.0), plateau_tiebreak=True)
+    assert not is_improvement((0.0, 3.0), (0.0, 2.0), plateau_tiebreak=False)
+    assert not is_improvement((0.0, 2.0), (0.0, 2.0), plateau_tiebreak=True)
 
 
 # A task without integrator energy pumping (semi-implicit Euler, an overdamped hinge): score
@@ -297,12 +306,3 @@ def test_ddpg_learns_a_task_untrained_policies_cannot_pass():
     for result in results:
         assert result.start_fitness == 0.0
         assert result.fitness >= LEARNING_THRESHOLD and result.improved
-
-
-def test_exploration_noise_has_the_configured_standard_deviation_and_is_clipped():
-    rngs = [np.random.default_rng(i) for i in range(4000)]
-    actions = exploration_actions(np.full((4000, 2), 0.5), rngs, 0.1)
-    assert np.std(actions - 0.5) == pytest.approx(0.1, rel=0.05)
-    assert abs(np.mean(actions - 0.5)) < 0.01
-    edge = exploration_actions(np.full((4000, 1), 0.99), rngs, 0.1)
-    assert edge.max() == 1.0 and (edge <= 1.0).all() and (edge < 0.99).any()

@@ -1,14 +1,17 @@
 """Experiments: storage, resume after SIGKILL, executors agree, corrupt files, bad input."""
 
+import dataclasses
 import os
 import signal
 import subprocess
 import sys
 import time
 
+import numpy as np
 import pandas as pd
 import pytest
 
+from lonlib.behaviour import LABELS, describe, descriptors_of
 from lonlib.cli import main as cli_main
 from lonlib.experiment import (
     ExperimentConfig,
@@ -26,7 +29,10 @@ from lonlib.store import (
 )
 from tests.conftest import write_tiny_yaml
 
-COMPARED = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps"]
+COMPARED = [
+    *("p", "run", "index", "parent", "fitness", "accepted", "env_steps"),
+    *("start_fitness", "improved", "stop_reason", "label", "b_turns_0", "b_robust_mean"),
+]
 
 
 @pytest.fixture(scope="module")
@@ -50,6 +56,32 @@ def test_serial_run_stores_trials_optima_and_manifest(reference):
         assert key in manifest
     table = status(out)
     assert list(table["finished"]) == [2, 2] and list(table["not_started"]) == [0, 0]
+
+
+def test_every_trial_stores_its_behaviour_and_the_start_it_came_from(reference):
+    config, out, trials = reference
+    assert trials["label"].isin(LABELS).all() and trials["b_end_step"].gt(0).all()
+    assert trials["start_fitness"].notna().all() and trials["stop_reason"].eq("budget").all()
+    assert (trials["improved"] == (trials["fitness"] > trials["start_fitness"])).all()
+    stored = descriptors_of(trials)
+    for row, descriptor in zip(trials.itertuples(), stored, strict=True):
+        assert descriptor.fitness == pytest.approx(row.fitness)  # the rollout is the optimum's
+        if row.accepted:  # a fresh rollout of the stored parameters gives the stored descriptor
+            optimum = read_optimum(optimum_path(out, row.p, row.run, row.index))
+            fresh = describe(optimum.theta, config.env, config.ddpg.eval_seed)
+            np.testing.assert_equal(dataclasses.asdict(fresh), dataclasses.asdict(descriptor))
+
+
+def test_only_result_changing_settings_must_match_to_resume(reference, tmp_path):
+    config, out, trials = reference
+    elsewhere = dataclasses.replace(
+        config, ddpg=dataclasses.replace(config.ddpg, threads=2, device="cpu:0")
+    )
+    again = run_experiment(elsewhere, out, progress=False)
+    pd.testing.assert_frame_equal(again[COMPARED], trials[COMPARED])
+    changed = dataclasses.replace(config, ddpg=dataclasses.replace(config.ddpg, batch_size=16))
+    with pytest.raises(ValueError, match="different configuration"):
+        run_experiment(changed, out, progress=False)
 
 
 def test_rerun_resumes_and_redoes_nothing(reference):

@@ -1,0 +1,257 @@
+"""What an optimum does: a behaviour descriptor from its greedy rollout, and labels.
+
+The paper names its optima by behaviour ("balancing" at 0.72 and above; carts that "come to
+an immediate stop upon approaching the boundary" at 0.22); a LON node is otherwise only a
+number. :func:`describe` replays a policy greedily once (the same start as the fitness
+evaluation, so the rollout reproduces the optimum's fitness) and measures, per rod, the
+upright share, the signed full turns and the mean angular speed while upright; the rods'
+phase relation (the circular correlation ``mean cos(phi_i - phi_j)`` of neighbours: +1 in
+phase, -1 anti-phase, ~0 independent); the carts' range and mean speed; the end reason and
+step; and robustness: the fitness of the same policy from ``robustness_starts`` slightly
+perturbed start states (all simulated as one batch).
+
+:func:`label` turns a descriptor into one of :data:`LABELS` by documented thresholds
+(:class:`BehaviourThresholds`), so labels can be recomputed with other thresholds from the
+stored descriptors without simulating again. Experiments store the descriptor of every
+local search (accepted or not) with its trial (columns ``b_*``) and the default label.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from lonlib.nets import actor_spec, forward_numpy
+from lonlib.pendulum import (
+    CoupledPendulums,
+    EndReason,
+    PendulumConfig,
+    Policy,
+    wrap_angle,
+)
+from lonlib.validation import check_field_types, check_range
+
+LABELS = (
+    "balancing",
+    "one rod up",
+    "spinning (in phase)",
+    "spinning (anti-phase)",
+    "spinning (independent)",
+    "spinning",
+    "swinging high",
+    "swinging low",
+    "stops at boundary",
+    "crash",
+)
+"""Every label :func:`label` can return, from the most to the least accomplished."""
+
+PREFIX = "b_"  # column prefix of descriptor fields in a trials table
+
+
+@dataclass(frozen=True)
+class BehaviourDescriptor:
+    """Measurements of one greedy rollout. Per-rod fields are tuples (one value per rod)."""
+
+    fitness: float  # Algorithm 1 fitness of the rollout (equals the optimum's)
+    upright_share: tuple[float, ...]  # share of executed steps with the rod upright
+    turns: tuple[float, ...]  # signed full turns of the rod over the episode
+    upright_speed: tuple[float, ...]  # mean |phi_dot| while upright [rad/s] (0 if never)
+    phase: float  # mean cos(phi_i - phi_{i+1}) over steps and neighbours (nan for 1 rod)
+    cart_range: float  # mean over carts of (max x - min x) [m]
+    cart_speed: float  # mean |x_dot| over carts and steps [m/s]
+    end_reason: str  # EndReason name
+    end_step: int  # steps executed
+    nominal_steps: int  # the episode's step limit
+    robust_mean: float  # fitness from perturbed starts: mean
+    robust_min: float  # and worst
+
+    def to_columns(self) -> dict[str, float | int | str]:
+        """Flat ``b_*`` columns for a trials table (per-rod fields as ``b_<name>_<rod>``)."""
+        out: dict[str, float | int | str] = {}
+        for name, value in asdict(self).items():
+            if isinstance(value, tuple):
+                out.update({f"{PREFIX}{name}_{i}": float(v) for i, v in enumerate(value)})
+            else:
+                out[f"{PREFIX}{name}"] = value
+        return out
+
+    @classmethod
+    def from_columns(cls, row: dict) -> BehaviourDescriptor:
+        """Inverse of :meth:`to_columns` (a trials-table row as a mapping)."""
+        values = {}
+        for f in fields(cls):
+            if f.name in ("upright_share", "turns", "upright_speed"):
+                rods = sorted(
+                    (int(key.rsplit("_", 1)[1]), value)
+                    for key, value in row.items()
+                    if key.startswith(f"{PREFIX}{f.name}_") and key.rsplit("_", 1)[1].isdigit()
+                )
+                values[f.name] = tuple(float(value) for _, value in rods)
+            else:
+                values[f.name] = row[f"{PREFIX}{f.name}"]
+        values["end_step"] = int(values["end_step"])
+        values["nominal_steps"] = int(values["nominal_steps"])
+        values["end_reason"] = str(values["end_reason"])
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class BehaviourThresholds:
+    """The rules of :func:`label`, applied in this order (README, "Behaviours"):
+
+    1. ``crash``: the episode ended by collision or tether before ``early_end_share`` of
+       the nominal steps; ``stops at boundary``: it ended at a track end that early.
+    2. ``balancing``: every rod upright for at least ``balance_share`` of the steps, slowly
+       (mean ``|phi_dot|`` while upright below ``balance_speed``) and turning fewer than
+       ``spin_turns`` times; ``one rod up``: at least one rod so, not all.
+    3. ``spinning``: some rod turns ``spin_turns`` full turns or more; with several rods the
+       phase says ``in phase`` (>= ``phase_lock``), ``anti-phase`` (<= -``phase_lock``) or
+       ``independent``.
+    4. ``swinging high``: some rod upright for at least ``high_share`` of the steps;
+       otherwise ``swinging low``.
+    """
+
+    early_end_share: float = 0.9
+    balance_share: float = 0.5
+    balance_speed: float = 0.5
+    spin_turns: float = 2.0
+    phase_lock: float = 0.5
+    high_share: float = 0.01
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        for name in ("early_end_share", "balance_share", "phase_lock", "high_share"):
+            check_range(name, getattr(self, name), 0.0, 1.0)
+        check_range("balance_speed", self.balance_speed, 0.0, low_open=True)
+        check_range("spin_turns", self.spin_turns, 0.0, low_open=True)
+
+
+def describe(
+    theta_or_policy: np.ndarray | Policy,
+    config: PendulumConfig,
+    eval_seed: int = 0,
+    robustness_starts: int = 8,
+    robustness_noise: float = 0.01,
+    robustness_seed: int = 0,
+) -> BehaviourDescriptor:
+    """Descriptor of a greedy Actor (flat parameters) or any policy on ``config``.
+
+    The nominal rollout starts as the fitness evaluation does (``eval_seed``); robustness
+    rollouts add U[-noise, noise] to every start coordinate (x, x_dot, phi, phi_dot) of
+    every cart, drawn from ``robustness_seed``, and run as one batch.
+    """
+    check_range("robustness_starts", robustness_starts, 1, 10_000)
+    check_range("robustness_noise", robustness_noise, 0.0, 0.5)
+    policy = as_policy(theta_or_policy, config)
+    n = config.n_carts
+    sim = CoupledPendulums(config, 1, eval_seed)
+    phis, phi_dots, xs, x_dots = [], [], [], []
+    while not sim.done[0]:
+        sim.step(policy(sim.observe()))
+        phis.append(sim.phi[0].copy())
+        phi_dots.append(sim.phi_dot[0].copy())
+        xs.append(sim.x[0].copy())
+        x_dots.append(sim.x_dot[0].copy())
+    phi, phi_dot = np.array(phis), np.array(phi_dots)  # [T, n]
+    x, x_dot = np.array(xs), np.array(x_dots)
+    upright = np.abs(wrap_angle(phi)) < config.upright_angle
+    start_phi = np.full(n, config.initial_angle)
+    unwrapped = np.unwrap(np.vstack([start_phi, phi]), axis=0)
+    turns = (unwrapped[-1] - unwrapped[0]) / (2 * np.pi)
+    speed_up = np.where(
+        upright.any(axis=0),
+        (np.abs(phi_dot) * upright).sum(axis=0) / np.maximum(upright.sum(axis=0), 1),
+        0.0,
+    )
+    phase = float(np.mean(np.cos(phi[:, :-1] - phi[:, 1:]))) if n > 1 else float("nan")
+
+    robust = _robustness(policy, config, robustness_starts, robustness_noise, robustness_seed)
+    return BehaviourDescriptor(
+        fitness=float(sim.fitness[0]),
+        upright_share=tuple(float(v) for v in upright.mean(axis=0)),
+        turns=tuple(float(v) for v in turns),
+        upright_speed=tuple(float(v) for v in speed_up),
+        phase=phase,
+        cart_range=float(np.mean(x.max(axis=0) - x.min(axis=0))),
+        cart_speed=float(np.mean(np.abs(x_dot))),
+        end_reason=EndReason(int(sim.end_reason[0])).name,
+        end_step=int(sim.step_count[0]),
+        nominal_steps=config.steps,
+        robust_mean=float(robust.mean()),
+        robust_min=float(robust.min()),
+    )
+
+
+def describe_columns(theta: np.ndarray, config: PendulumConfig, eval_seed: int = 0) -> dict:
+    """:func:`describe` with the default robustness settings as flat trials-table columns
+    (``b_*``) plus the default ``label``: what experiments store with every trial."""
+    descriptor = describe(theta, config, eval_seed)
+    return {**descriptor.to_columns(), "label": label(descriptor)}
+
+
+def descriptors_of(trials) -> list[BehaviourDescriptor | None]:
+    """The stored descriptor of each row of a trials table (None where a trial has none)."""
+    columns = [c for c in trials.columns if c.startswith(PREFIX)]
+    rows = trials[columns].to_dict("records")
+    # A trial without a descriptor has no end reason (NaN in a table where others have one).
+    described = [isinstance(row.get(f"{PREFIX}end_reason"), str) for row in rows]
+    return [
+        BehaviourDescriptor.from_columns(row) if ok else None
+        for row, ok in zip(rows, described, strict=True)
+    ]
+
+
+def relabel(trials, thresholds: BehaviourThresholds | None = None) -> list[str | None]:
+    """Labels of a trials table's stored descriptors under other ``thresholds``."""
+    return [None if d is None else label(d, thresholds) for d in descriptors_of(trials)]
+
+
+def as_policy(theta_or_policy: np.ndarray | Policy, config: PendulumConfig) -> Policy:
+    """A flat Actor vector becomes its greedy policy; a callable is returned as it is."""
+    if callable(theta_or_policy):
+        return theta_or_policy
+    spec = actor_spec(config.n_carts)
+    theta = np.asarray(theta_or_policy, dtype=np.float32)
+    return lambda obs: forward_numpy(spec, theta, obs)
+
+
+def _robustness(
+    policy: Policy, config: PendulumConfig, starts: int, noise: float, seed: int
+) -> np.ndarray:
+    """Fitness of ``policy`` from ``starts`` perturbed start states, one batch."""
+    sim = CoupledPendulums(config, starts)
+    draws = np.random.default_rng(seed).uniform(-noise, noise, size=(4, starts, config.n_carts))
+    sim.reset(noise=draws)
+    while not sim.done.all():
+        sim.step(policy(sim.observe()))
+    return sim.fitness.copy()
+
+
+def label(descriptor: BehaviourDescriptor, thresholds: BehaviourThresholds | None = None) -> str:
+    """The behaviour label of a descriptor (rules in :class:`BehaviourThresholds`)."""
+    t = thresholds or BehaviourThresholds()
+    early = descriptor.end_step < t.early_end_share * descriptor.nominal_steps
+    if early and descriptor.end_reason in ("COLLISION", "TETHER"):
+        return "crash"
+    if early and descriptor.end_reason == "BOUNDARY":
+        return "stops at boundary"
+    share = np.array(descriptor.upright_share)
+    turns = np.abs(np.array(descriptor.turns))
+    slow = np.array(descriptor.upright_speed) < t.balance_speed
+    balanced = (share >= t.balance_share) & slow & (turns < t.spin_turns)
+    if balanced.all():
+        return "balancing"
+    if balanced.any():
+        return "one rod up"
+    if (turns >= t.spin_turns).any():
+        if len(share) == 1 or np.isnan(descriptor.phase):
+            return "spinning"
+        if descriptor.phase >= t.phase_lock:
+            return "spinning (in phase)"
+        if descriptor.phase <= -t.phase_lock:
+            return "spinning (anti-phase)"
+        return "spinning (independent)"
+    if (share >= t.high_share).any():
+        return "swinging high"
+    return "swinging low"

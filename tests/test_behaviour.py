@@ -1,0 +1,136 @@
+"""Behaviour descriptors and labels: policies of known behaviour, rules, storage."""
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lonlib.behaviour import (
+    LABELS,
+    BehaviourDescriptor,
+    BehaviourThresholds,
+    describe,
+    descriptors_of,
+    label,
+    relabel,
+)
+from lonlib.controllers import SwingUpBalanceController, zero_controller
+from lonlib.nets import actor_spec, forward_numpy
+from lonlib.pendulum import PendulumConfig, evaluate
+
+
+def test_the_swing_up_and_balance_controller_is_labelled_balancing():
+    config = PendulumConfig(n_carts=1)
+    controller = SwingUpBalanceController(config)
+    d = describe(controller, config)
+    assert label(d) == "balancing"
+    assert d.fitness == pytest.approx(evaluate(controller, config).fitness[0])
+    assert d.upright_share[0] > 0.85 and d.upright_speed[0] < 0.2
+    assert abs(d.turns[0]) == pytest.approx(0.5, abs=0.01)  # one swing up, then balance
+    assert 0.85 < d.robust_min <= d.robust_mean
+    assert (d.end_reason, d.end_step, d.nominal_steps) == ("STEP_LIMIT", 2000, 2000)
+
+
+def test_never_pushing_from_a_hang_is_swinging_low():
+    config = PendulumConfig(n_carts=2, integrator="semi-implicit")
+    d = describe(zero_controller(config), config)
+    assert label(d) == "swinging low"
+    assert d.fitness == 0 and d.upright_share == (0.0, 0.0) and d.cart_range < 1e-3
+    assert d.phase == pytest.approx(1.0)  # two identical hanging rods move as one
+
+
+def test_explicit_eulers_energy_pumping_spins_an_unpushed_rod():
+    # The integrator artefact of the README: from 0.1 rad of start noise, a never-pushing
+    # policy's rod swings over the top after ~1400 steps and then spins.
+    config = PendulumConfig(n_carts=1, initial_noise=0.1, integrator="euler", steps=3000)
+    d = describe(zero_controller(config), config, eval_seed=0)
+    assert label(d) == "spinning"
+    assert abs(d.turns[0]) > 20 and d.upright_share[0] > 0.2
+
+
+def test_robustness_uses_perturbed_starts():
+    # A rod at rest exactly upright stays up without a push; 0.01 rad of noise topples it.
+    config = PendulumConfig(n_carts=1, steps=300, initial_angle=0.0)
+    never_push = zero_controller(config)
+    exact = describe(never_push, config, robustness_noise=0.0)
+    assert exact.fitness == exact.robust_mean == exact.robust_min == 1.0
+    noisy = describe(never_push, config, robustness_noise=0.01, robustness_starts=8)
+    assert noisy.fitness == 1.0 and noisy.robust_min <= noisy.robust_mean < 0.8
+
+
+def descriptor(**changes):
+    base = BehaviourDescriptor(
+        fitness=0.3,
+        upright_share=(0.3, 0.3),
+        turns=(40.0, -35.0),
+        upright_speed=(6.0, 6.0),
+        phase=0.9,
+        cart_range=1.0,
+        cart_speed=0.5,
+        end_reason="STEP_LIMIT",
+        end_step=2000,
+        nominal_steps=2000,
+        robust_mean=0.2,
+        robust_min=0.1,
+    )
+    return dataclasses.replace(base, **changes)
+
+
+@pytest.mark.parametrize(
+    ("changes", "expected"),
+    [
+        ({}, "spinning (in phase)"),
+        ({"phase": -0.8}, "spinning (anti-phase)"),
+        ({"phase": 0.1}, "spinning (independent)"),
+        ({"turns": (3.0,), "upright_share": (0.3,), "upright_speed": (6.0,)}, "spinning"),
+        (
+            {"upright_share": (0.9, 0.8), "turns": (0.5, 0.5), "upright_speed": (0.1, 0.2)},
+            "balancing",
+        ),
+        (
+            {"upright_share": (0.9, 0.3), "turns": (0.5, 1.0), "upright_speed": (0.1, 4.0)},
+            "one rod up",
+        ),
+        ({"turns": (1.0, 0.5)}, "swinging high"),
+        ({"turns": (0.1, 0.1), "upright_share": (0.0, 0.0)}, "swinging low"),
+        ({"end_reason": "BOUNDARY", "end_step": 400}, "stops at boundary"),
+        ({"end_reason": "COLLISION", "end_step": 90}, "crash"),
+        ({"end_reason": "TETHER", "end_step": 1900}, "spinning (in phase)"),  # late: not a crash
+    ],
+)
+def test_label_rules(changes, expected):
+    assert label(descriptor(**changes)) == expected
+    assert expected in LABELS
+
+
+def test_thresholds_are_adjustable_and_validated():
+    slow_top = descriptor(upright_share=(0.6, 0.6), turns=(0.5, 0.5), upright_speed=(0.3, 0.3))
+    assert label(slow_top) == "balancing"
+    assert label(slow_top, BehaviourThresholds(balance_share=0.7)) == "swinging high"
+    assert label(slow_top, BehaviourThresholds(balance_speed=0.2)) == "swinging high"
+    with pytest.raises(ValueError, match="balance_share"):
+        BehaviourThresholds(balance_share=1.5)
+
+
+def test_descriptor_columns_round_trip_and_relabel_from_a_table():
+    a, b = descriptor(), descriptor(phase=-0.9)
+    table = pd.DataFrame([{"index": 0, **a.to_columns()}, {"index": 1, **b.to_columns()}, {}])
+    got = descriptors_of(table)
+    assert got[:2] == [a, b] and got[2] is None
+    assert relabel(table) == ["spinning (in phase)", "spinning (anti-phase)", None]
+    assert relabel(table, BehaviourThresholds(phase_lock=0.95)) == [
+        "spinning (independent)",
+        "spinning (independent)",
+        None,
+    ]
+
+
+def test_an_actor_is_described_by_its_flat_parameters():
+    config = PendulumConfig(n_carts=1, steps=100)
+    theta = actor_spec(1).initial(np.random.default_rng(0))
+    d = describe(theta, config)
+    policy_fitness = evaluate(lambda obs: forward_numpy(actor_spec(1), theta, obs), config).fitness[
+        0
+    ]
+    assert d.fitness == pytest.approx(policy_fitness)
