@@ -5,20 +5,16 @@ perturbation strength ``p``. Run ``(p, run)`` draws everything from a seed deriv
 ``(experiment seed, p, run)``, so its result does not depend on where or in what order it
 runs. :func:`run_experiment` skips finished runs, continues interrupted ones after their
 last stored local search (see :mod:`lonlib.store`) and executes the rest serially, in local
-worker processes, or on a Dask cluster.
+worker processes, or on a Dask cluster (:mod:`lonlib.executors`); :mod:`lonlib.manifest`
+records the configuration and each session.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
-import multiprocessing
-import platform
-import subprocess
 import zlib
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from importlib import metadata
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +29,8 @@ from lonlib.basin_hopping import (
     ddpg_local_search,
 )
 from lonlib.ddpg import DDPGConfig
+from lonlib.executors import run_dask, run_pool, run_serial
+from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
 from lonlib.store import (
@@ -43,8 +41,6 @@ from lonlib.store import (
     write_json,
 )
 from lonlib.validation import check_field_types, check_range
-
-PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
 
 
 @dataclass(frozen=True)
@@ -223,69 +219,7 @@ def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> di
     }
 
 
-# ---------------------------------------------------------------------------- manifest
-def _git_commit() -> str | None:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=Path(__file__).parent,
-            timeout=5,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def _versions() -> dict[str, str | None]:
-    out = {"python": platform.python_version()}
-    for name in ("lonlib", *PACKAGES):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = None
-    return out
-
-
-def updated_manifest(config: ExperimentConfig, out: Path) -> dict[str, Any]:
-    """The manifest ``out`` should hold for ``config`` (new, or the stored one with this
-    session added); refuses a folder holding another experiment. Writes nothing."""
-    path = out / "manifest.json"
-    now = datetime.now(UTC).isoformat(timespec="seconds")
-    if path.exists():
-        manifest = read_json(path)
-        stored = ExperimentConfig.from_mapping(manifest["config"])
-        if stored.comparable() != config.comparable():
-            changed = sorted(
-                k for k in config.comparable() if stored.comparable()[k] != config.comparable()[k]
-            )
-            raise ValueError(
-                f"{out} holds an experiment with a different configuration ({changed} differ); "
-                "choose another output folder or use the stored configuration"
-            )
-        runs = max(stored.runs, config.runs)
-        perturbations = tuple(dict.fromkeys((*stored.perturbations, *config.perturbations)))
-        merged = dataclasses.replace(stored, runs=runs, perturbations=perturbations)
-        manifest["config"] = merged.to_dict()
-        manifest.setdefault("sessions", []).append(
-            {"started": now, "versions": _versions(), "git_commit": _git_commit()}
-        )
-    else:
-        manifest = {
-            "experiment": config.name,
-            "created": now,
-            "config": config.to_dict(),
-            "lonlib_version": _versions()["lonlib"],
-            "git_commit": _git_commit(),
-            "versions": _versions(),
-            "host": platform.node(),
-            "sessions": [{"started": now}],
-        }
-    return manifest
-
-
-# ---------------------------------------------------------------------------- executors
+# ---------------------------------------------------------------------------- experiments
 def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]:
     """Runs that are not finished yet (reads every stored run; corrupt files raise)."""
     pending = []
@@ -317,7 +251,7 @@ def run_experiment(
     out = Path(out)
     manifest = updated_manifest(config, out)
     todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
-    write_json(out / "manifest.json", manifest)
+    write_json(manifest_path(out), manifest)
     total = len(config.perturbations) * config.runs
     bar = tqdm(
         total=total,
@@ -326,17 +260,20 @@ def run_experiment(
         disable=not progress,
         unit="run",
     )
+    task = partial(run_one, out, config)
+
+    def on_done(_: dict[str, Any]) -> None:
+        _refresh(bar, out, done=1)
+
     try:
         if not todo:
             pass
         elif scheduler is not None:
-            _run_dask(config, out, todo, workers, scheduler, bar, max_attempts)
+            run_dask(task, todo, workers, scheduler, on_done, max_attempts, config.name)
         elif workers <= 1:
-            for p, run in todo:
-                run_one(out, config, p, run)
-                _refresh(bar, out, done=1)
+            run_serial(task, todo, on_done)
         else:
-            _run_pool(config, out, todo, workers, bar, max_attempts)
+            run_pool(task, todo, workers, on_done, max_attempts, lambda: _refresh(bar, out))
     finally:
         bar.close()
     return read_experiment_trials(out)
@@ -352,71 +289,11 @@ def _refresh(bar: tqdm, out: Path, done: int = 0) -> None:
         bar.set_postfix(local_searches=len(trials), best=f"{trials['fitness'].max():.3f}")
 
 
-def _run_pool(config, out, todo, workers, bar, max_attempts) -> None:
-    attempts = dict.fromkeys(todo, 0)
-    remaining = list(todo)
-    while remaining:
-        context = multiprocessing.get_context("spawn")
-        broken: list[tuple[float, int]] = []
-        with cf.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = {pool.submit(run_one, out, config, p, run): (p, run) for p, run in remaining}
-            pending = set(futures)
-            while pending:
-                done, pending = cf.wait(pending, timeout=5, return_when=cf.FIRST_COMPLETED)
-                for future in done:
-                    key = futures[future]
-                    try:
-                        future.result()
-                        _refresh(bar, out, done=1)
-                    except cf.process.BrokenProcessPool:
-                        broken.append(key)
-                _refresh(bar, out)
-        for key in broken:
-            attempts[key] += 1
-            if attempts[key] >= max_attempts:
-                raise RuntimeError(f"run p={key[0]} run={key[1]} failed {max_attempts} times")
-        remaining = broken
-
-
-def _run_dask(config, out, todo, workers, scheduler, bar, max_attempts) -> None:
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler == "dask-local":
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-        )
-        client = Client(cluster)
-    else:
-        client = Client(scheduler, timeout="30s")
-    try:
-        futures = [
-            client.submit(
-                run_one,
-                str(out),
-                config,
-                p,
-                run,
-                key=f"{config.name}-{p}-{run}",
-                retries=max_attempts - 1,
-                pure=False,
-            )
-            for p, run in todo
-        ]
-        for future in as_completed(futures):
-            future.result()
-            _refresh(bar, out, done=1)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
 def status(out: str | Path) -> pd.DataFrame:
     """Per p: runs finished, started (interrupted or running), not started; local searches,
     best fitness. Reads the manifest for the planned runs."""
     out = Path(out)
-    manifest = read_json(out / "manifest.json")
+    manifest = read_json(manifest_path(out))
     config = ExperimentConfig.from_mapping(manifest["config"])
     rows = []
     for p in config.perturbations:
