@@ -40,7 +40,7 @@ from lonlib.store import (
     save_step,
     write_json,
 )
-from lonlib.validation import check_field_types, check_range
+from lonlib.validation import check_field_types, check_keys, check_range, is_finite
 
 
 @dataclass(frozen=True)
@@ -59,15 +59,16 @@ class ExperimentConfig:
 
     def __post_init__(self) -> None:
         check_field_types(self)
-        if (
-            not isinstance(self.name, str)
-            or not self.name.replace("-", "").replace("_", "").isalnum()
-        ):
+        if not self.name.replace("-", "").replace("_", "").isalnum():
             raise ValueError(f"name must be letters, digits, '-' or '_', got {self.name!r}")
-        if not self.perturbations:
-            raise ValueError("perturbations must list at least one p > 0")
+        if isinstance(self.perturbations, list):
+            object.__setattr__(self, "perturbations", tuple(self.perturbations))
+        if not isinstance(self.perturbations, tuple) or not self.perturbations:
+            raise ValueError(
+                f"perturbations must list at least one p > 0, got {self.perturbations!r}"
+            )
         for p in self.perturbations:
-            if isinstance(p, bool) or not isinstance(p, (int, float)) or not np.isfinite(p):
+            if isinstance(p, bool) or not isinstance(p, (int, float)) or not is_finite(p):
                 raise ValueError(f"perturbations must be numbers, got {p!r}")
             check_range("perturbations", p, 0.0, 10.0, low_open=True)
         if len(set(self.perturbations)) != len(self.perturbations):
@@ -76,6 +77,10 @@ class ExperimentConfig:
         check_range("seed", self.seed, 0, 2**63 - 1)
         # BasinHoppingConfig validates tolerance and max_local_searches by name.
         self.basin_hopping(self.perturbations[0])
+        if not isinstance(self.env, PendulumConfig):
+            raise ValueError(f"env must be a PendulumConfig, got {self.env!r}")
+        if not isinstance(self.ddpg, DDPGConfig):
+            raise ValueError(f"ddpg must be a DDPGConfig, got {self.ddpg!r}")
 
     def basin_hopping(self, p: float) -> BasinHoppingConfig:
         """Algorithm 2's settings for perturbation strength ``p``."""
@@ -91,25 +96,26 @@ class ExperimentConfig:
     def from_mapping(cls, values: dict[str, Any]) -> ExperimentConfig:
         """Build from a mapping, e.g. YAML. ``base: quick|paper`` starts from a named
         configuration; unknown keys are refused by name."""
-        values = dict(values)
+        values = dict(_mapping("configuration", values))
         base = values.pop("base", None)
+        if base is not None and base not in ("quick", "paper"):
+            raise ValueError(f"base must be 'quick' or 'paper', got {base!r}")
         start = named_config(base).to_dict() if base else cls().to_dict()
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown experiment key(s) {unknown}; allowed: {sorted(known)}")
+        check_keys("experiment", values, cls)
         given = sorted(set(values) - {"name"})
-        env = {**start.pop("env"), **(values.pop("env", None) or {})}
-        ddpg = {**start.pop("ddpg"), **(values.pop("ddpg", None) or {})}
+        env = {**start.pop("env"), **_mapping("env", values.pop("env", None))}
+        ddpg = {**start.pop("ddpg"), **_mapping("ddpg", values.pop("ddpg", None))}
         merged = {**start, **values}
         if "note" not in values and given:
             merged["note"] = f"based on {base or 'the defaults'}, changed: {', '.join(given)}"
+        if not isinstance(merged["perturbations"], (list, tuple)):
+            raise ValueError(
+                f"perturbations must be a list of numbers, got {merged['perturbations']!r}"
+            )
         merged["perturbations"] = tuple(
             _as_float("perturbations", p) for p in merged["perturbations"]
         )
-        unknown_ddpg = sorted(set(ddpg) - {f.name for f in dataclasses.fields(DDPGConfig)})
-        if unknown_ddpg:
-            raise ValueError(f"unknown ddpg key(s) {unknown_ddpg}")
+        check_keys("ddpg", ddpg, DDPGConfig)
         return cls(env=PendulumConfig.from_mapping(env), ddpg=DDPGConfig(**ddpg), **merged)
 
     def run_seed(self, p: float, run: int) -> int:
@@ -127,10 +133,21 @@ class ExperimentConfig:
 
 
 def _as_float(name: str, value: Any) -> float:
+    if isinstance(value, bool):
+        raise ValueError(f"{name} must be numbers, got {value!r}")
     try:
         return float(value)  # YAML 1.1 reads "1e-3" as a string
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be numbers, got {value!r}") from None
+
+
+def _mapping(name: str, value: Any) -> dict:
+    """``value`` as a mapping of settings (None, e.g. an empty YAML section, is empty)."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{name} must be a mapping of settings, got {value!r}")
+    return value
 
 
 QUICK_DDPG = DDPGConfig(
