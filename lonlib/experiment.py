@@ -12,6 +12,8 @@ records the configuration and each session.
 from __future__ import annotations
 
 import dataclasses
+import errno
+import logging
 import zlib
 from dataclasses import dataclass, field
 from functools import partial
@@ -29,18 +31,28 @@ from lonlib.basin_hopping import (
     ddpg_local_search,
 )
 from lonlib.ddpg import DDPGConfig
-from lonlib.executors import run_dask, run_pool, run_serial
+from lonlib.executors import execute_runs
+from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
 from lonlib.store import (
+    DataWriteError,
+    check_output_folder,
     load_run_state,
     read_experiment_trials,
     read_json,
+    remove_temporary_files,
+    run_dir,
     save_step,
     write_json,
 )
 from lonlib.validation import check_field_types, check_keys, check_range, is_finite
+
+log = logging.getLogger(__name__)
+
+RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
+MANIFEST_LOCK = ".manifest.lock"  # in the experiment folder: guards manifest check + update
 
 
 @dataclass(frozen=True)
@@ -212,15 +224,31 @@ def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np
     return actor_spec(n).initial(rng), critic_spec(n).initial(rng)
 
 
-def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+def run_one(
+    out: str | Path, config: ExperimentConfig, p: float, run: int, wait: bool = True
+) -> dict[str, Any]:
     """Execute (or resume, or skip if finished) run ``(p, run)``, storing every local search.
 
-    Returns a summary: p, run, local searches, best fitness, end reason.
+    Holds the run's lock throughout, so no other process writes the run at the same time.
+    If another process holds it: wait for it to finish or die, then continue from what it
+    stored (``wait``), or return at once with ``held_by`` naming the holder.
+
+    Returns a summary: p, run, local searches, best fitness, end reason, held_by (None
+    unless the run was left to its holder).
     """
-    out = Path(out)
+    folder = run_dir(Path(out), p, run)
+    try:
+        with exclusive_lock(folder / RUN_LOCK, wait=wait):
+            return _run_locked(Path(out), config, p, run)
+    except LockHeld as held:
+        return {"p": p, "run": run, "held_by": held.holder}
+
+
+def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+    remove_temporary_files(run_dir(out, p, run))
     bh = config.basin_hopping(p)
-    state = load_run_state(out, p, run, bh)
-    if state is None or not state.finished:
+    state = load_run_state(out, p, run, bh)  # read under the lock: a holder before us may
+    if state is None or not state.finished:  # have stored more than the caller saw
         search = ddpg_local_search(config.env, config.ddpg)
         start = initial_parameters(config, p, run)
         steps = basin_hopping_steps(search, start, bh, config.run_seed(p, run), state)
@@ -233,6 +261,7 @@ def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> di
         "local_searches": len(state.trials),
         "best_fitness": state.incumbent.fitness if state.incumbent else float("nan"),
         "end_reason": state.end_reason,
+        "held_by": None,
     }
 
 
@@ -263,12 +292,22 @@ def run_experiment(
     worker processes (one torch thread each). ``scheduler``: a Dask scheduler address, or
     ``"dask-local"`` for a LocalCluster of ``workers`` processes. A run whose worker dies is
     retried (up to ``max_attempts``) and resumes from its last stored local search.
+
+    Before any compute: ``out`` must exist or be creatable in an existing folder and accept
+    files (:class:`lonlib.store.DataWriteError` otherwise; on Dask, every worker checks it
+    too), and its stored runs must be readable. A run that another process is writing is
+    left to it and waited for once everything else is done; if its holder dies, this
+    process continues the run from what the holder stored.
     """
     check_range("workers", workers, 1, 4096)
+    check_range("max_attempts", max_attempts, 1, 1000)
     out = Path(out)
-    manifest = updated_manifest(config, out)
-    todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
-    write_json(manifest_path(out), manifest)
+    check_output_folder(out)
+    with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
+        remove_temporary_files(out, manifest_path(out).name)
+        manifest = updated_manifest(config, out)
+        todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
+        write_json(manifest_path(out), manifest)
     total = len(config.perturbations) * config.runs
     bar = tqdm(
         total=total,
@@ -277,23 +316,52 @@ def run_experiment(
         disable=not progress,
         unit="run",
     )
-    task = partial(run_one, out, config)
+    held: dict[tuple[float, int], str] = {}
 
-    def on_done(_: dict[str, Any]) -> None:
-        _refresh(bar, out, done=1)
+    def on_done(summary: dict[str, Any]) -> None:
+        if summary["held_by"] is None:
+            _refresh(bar, out, done=1)
+        else:
+            held[summary["p"], summary["run"]] = summary["held_by"]
+
+    def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
+        execute_runs(
+            partial(run_one, out, config, wait=wait),
+            jobs,
+            on_done,
+            workers=workers,
+            scheduler=scheduler,
+            max_attempts=max_attempts,
+            key_prefix=config.name,
+            on_tick=lambda: _refresh(bar, out),
+            worker_check=partial(check_worker_sees_folder, str(out)),
+        )
 
     try:
-        if not todo:
-            pass
-        elif scheduler is not None:
-            run_dask(task, todo, workers, scheduler, on_done, max_attempts, config.name)
-        elif workers <= 1:
-            run_serial(task, todo, on_done)
-        else:
-            run_pool(task, todo, workers, on_done, max_attempts, lambda: _refresh(bar, out))
+        if todo:
+            execute(todo, wait=False)
+        if held:
+            names = "; ".join(f"p={p} run {run}: {who}" for (p, run), who in held.items())
+            log.warning("%s: waiting for runs another process is writing (%s)", out, names)
+            jobs = list(held)
+            held.clear()
+            execute(jobs, wait=True)
     finally:
         bar.close()
     return read_experiment_trials(out)
+
+
+def check_worker_sees_folder(out: str) -> None:
+    """On an executor's worker, before any compute: the experiment folder the client set up
+    is there (a worker without the shared file system would write elsewhere) and accepts
+    files. Raises :class:`lonlib.store.DataWriteError` naming the folder."""
+    if not manifest_path(Path(out)).exists():
+        raise DataWriteError(
+            errno.ENOENT,
+            f"cannot write {out}: this worker does not see the experiment's manifest there "
+            "(every worker needs the same folder, on a shared file system)",
+        )
+    check_output_folder(Path(out))
 
 
 def _refresh(bar: tqdm, out: Path, done: int = 0) -> None:
