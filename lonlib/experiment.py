@@ -5,20 +5,18 @@ perturbation strength ``p``. Run ``(p, run)`` draws everything from a seed deriv
 ``(experiment seed, p, run)``, so its result does not depend on where or in what order it
 runs. :func:`run_experiment` skips finished runs, continues interrupted ones after their
 last stored local search (see :mod:`lonlib.store`) and executes the rest serially, in local
-worker processes, or on a Dask cluster.
+worker processes, or on a Dask cluster (:mod:`lonlib.executors`); :mod:`lonlib.manifest`
+records the configuration and each session.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
-import multiprocessing
-import platform
-import subprocess
+import errno
+import logging
 import zlib
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from importlib import metadata
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,19 +31,29 @@ from lonlib.basin_hopping import (
     ddpg_local_search,
 )
 from lonlib.ddpg import DDPGConfig
+from lonlib.executors import execute_runs
+from lonlib.lock import LockHeld, exclusive_lock
+from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
 from lonlib.store import (
+    DataWriteError,
+    check_output_folder,
     load_run_state,
     read_experiment_trials,
     read_json,
+    remove_temporary_files,
+    run_dir,
     save_step,
     write_json,
 )
-from lonlib.validation import check_field_types, check_range
+from lonlib.validation import check_field_types, check_keys, check_range, is_finite
 
 EXECUTION_ONLY_DDPG_FIELDS = ("device", "threads")  # where DDPG runs, not what it computes
-PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
+log = logging.getLogger(__name__)
+
+RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
+MANIFEST_LOCK = ".manifest.lock"  # in the experiment folder: guards manifest check + update
 
 
 @dataclass(frozen=True)
@@ -64,15 +72,16 @@ class ExperimentConfig:
 
     def __post_init__(self) -> None:
         check_field_types(self)
-        if (
-            not isinstance(self.name, str)
-            or not self.name.replace("-", "").replace("_", "").isalnum()
-        ):
+        if not self.name.replace("-", "").replace("_", "").isalnum():
             raise ValueError(f"name must be letters, digits, '-' or '_', got {self.name!r}")
-        if not self.perturbations:
-            raise ValueError("perturbations must list at least one p > 0")
+        if isinstance(self.perturbations, list):
+            object.__setattr__(self, "perturbations", tuple(self.perturbations))
+        if not isinstance(self.perturbations, tuple) or not self.perturbations:
+            raise ValueError(
+                f"perturbations must list at least one p > 0, got {self.perturbations!r}"
+            )
         for p in self.perturbations:
-            if isinstance(p, bool) or not isinstance(p, (int, float)) or not np.isfinite(p):
+            if isinstance(p, bool) or not isinstance(p, (int, float)) or not is_finite(p):
                 raise ValueError(f"perturbations must be numbers, got {p!r}")
             check_range("perturbations", p, 0.0, 10.0, low_open=True)
         if len(set(self.perturbations)) != len(self.perturbations):
@@ -81,6 +90,10 @@ class ExperimentConfig:
         check_range("seed", self.seed, 0, 2**63 - 1)
         # BasinHoppingConfig validates tolerance and max_local_searches by name.
         self.basin_hopping(self.perturbations[0])
+        if not isinstance(self.env, PendulumConfig):
+            raise ValueError(f"env must be a PendulumConfig, got {self.env!r}")
+        if not isinstance(self.ddpg, DDPGConfig):
+            raise ValueError(f"ddpg must be a DDPGConfig, got {self.ddpg!r}")
 
     def basin_hopping(self, p: float) -> BasinHoppingConfig:
         """Algorithm 2's settings for perturbation strength ``p``."""
@@ -96,25 +109,26 @@ class ExperimentConfig:
     def from_mapping(cls, values: dict[str, Any]) -> ExperimentConfig:
         """Build from a mapping, e.g. YAML. ``base: quick|paper`` starts from a named
         configuration; unknown keys are refused by name."""
-        values = dict(values)
+        values = dict(_mapping("configuration", values))
         base = values.pop("base", None)
+        if base is not None and base not in ("quick", "paper"):
+            raise ValueError(f"base must be 'quick' or 'paper', got {base!r}")
         start = named_config(base).to_dict() if base else cls().to_dict()
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown experiment key(s) {unknown}; allowed: {sorted(known)}")
+        check_keys("experiment", values, cls)
         given = sorted(set(values) - {"name"})
-        env = {**start.pop("env"), **(values.pop("env", None) or {})}
-        ddpg = {**start.pop("ddpg"), **(values.pop("ddpg", None) or {})}
+        env = {**start.pop("env"), **_mapping("env", values.pop("env", None))}
+        ddpg = {**start.pop("ddpg"), **_mapping("ddpg", values.pop("ddpg", None))}
         merged = {**start, **values}
         if "note" not in values and given:
             merged["note"] = f"based on {base or 'the defaults'}, changed: {', '.join(given)}"
+        if not isinstance(merged["perturbations"], (list, tuple)):
+            raise ValueError(
+                f"perturbations must be a list of numbers, got {merged['perturbations']!r}"
+            )
         merged["perturbations"] = tuple(
             _as_float("perturbations", p) for p in merged["perturbations"]
         )
-        unknown_ddpg = sorted(set(ddpg) - {f.name for f in dataclasses.fields(DDPGConfig)})
-        if unknown_ddpg:
-            raise ValueError(f"unknown ddpg key(s) {unknown_ddpg}")
+        check_keys("ddpg", ddpg, DDPGConfig)
         return cls(env=PendulumConfig.from_mapping(env), ddpg=DDPGConfig(**ddpg), **merged)
 
     def run_seed(self, p: float, run: int) -> int:
@@ -135,10 +149,21 @@ class ExperimentConfig:
 
 
 def _as_float(name: str, value: Any) -> float:
+    if isinstance(value, bool):
+        raise ValueError(f"{name} must be numbers, got {value!r}")
     try:
         return float(value)  # YAML 1.1 reads "1e-3" as a string
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be numbers, got {value!r}") from None
+
+
+def _mapping(name: str, value: Any) -> dict:
+    """``value`` as a mapping of settings (None, e.g. an empty YAML section, is empty)."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{name} must be a mapping of settings, got {value!r}")
+    return value
 
 
 QUICK_DDPG = DDPGConfig(
@@ -203,15 +228,31 @@ def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np
     return actor_spec(n).initial(rng), critic_spec(n).initial(rng)
 
 
-def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+def run_one(
+    out: str | Path, config: ExperimentConfig, p: float, run: int, wait: bool = True
+) -> dict[str, Any]:
     """Execute (or resume, or skip if finished) run ``(p, run)``, storing every local search.
 
-    Returns a summary: p, run, local searches, best fitness, end reason.
+    Holds the run's lock throughout, so no other process writes the run at the same time.
+    If another process holds it: wait for it to finish or die, then continue from what it
+    stored (``wait``), or return at once with ``held_by`` naming the holder.
+
+    Returns a summary: p, run, local searches, best fitness, end reason, held_by (None
+    unless the run was left to its holder).
     """
-    out = Path(out)
+    folder = run_dir(Path(out), p, run)
+    try:
+        with exclusive_lock(folder / RUN_LOCK, wait=wait):
+            return _run_locked(Path(out), config, p, run)
+    except LockHeld as held:
+        return {"p": p, "run": run, "held_by": held.holder}
+
+
+def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+    remove_temporary_files(run_dir(out, p, run))
     bh = config.basin_hopping(p)
-    state = load_run_state(out, p, run, bh)
-    if state is None or not state.finished:
+    state = load_run_state(out, p, run, bh)  # read under the lock: a holder before us may
+    if state is None or not state.finished:  # have stored more than the caller saw
         search = ddpg_local_search(config.env, config.ddpg)
         start = initial_parameters(config, p, run)
         steps = basin_hopping_steps(search, start, bh, config.run_seed(p, run), state)
@@ -224,77 +265,11 @@ def run_one(out: str | Path, config: ExperimentConfig, p: float, run: int) -> di
         "local_searches": len(state.trials),
         "best_fitness": state.incumbent.fitness if state.incumbent else float("nan"),
         "end_reason": state.end_reason,
+        "held_by": None,
     }
 
 
-# ---------------------------------------------------------------------------- manifest
-def _git_commit() -> str | None:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=Path(__file__).parent,
-            timeout=5,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def _versions() -> dict[str, str | None]:
-    out = {"python": platform.python_version()}
-    for name in ("lonlib", *PACKAGES):
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = None
-    return out
-
-
-def updated_manifest(config: ExperimentConfig, out: Path) -> dict[str, Any]:
-    """The manifest ``out`` should hold for ``config`` (new, or the stored one with this
-    session added); refuses a folder holding another experiment. Writes nothing."""
-    path = out / "manifest.json"
-    now = datetime.now(UTC).isoformat(timespec="seconds")
-    if path.exists():
-        manifest = read_json(path)
-        stored = ExperimentConfig.from_mapping(manifest["config"])
-        if stored.comparable() != config.comparable():
-            changed = sorted(
-                k for k in config.comparable() if stored.comparable()[k] != config.comparable()[k]
-            )
-            raise ValueError(
-                f"{out} holds an experiment with a different configuration ({changed} differ); "
-                "choose another output folder or use the stored configuration"
-            )
-        runs = max(stored.runs, config.runs)
-        perturbations = tuple(dict.fromkeys((*stored.perturbations, *config.perturbations)))
-        merged = dataclasses.replace(stored, runs=runs, perturbations=perturbations)
-        manifest["config"] = merged.to_dict()
-        manifest.setdefault("sessions", []).append(
-            {
-                "started": now,
-                "versions": _versions(),
-                "git_commit": _git_commit(),
-                "execution": {k: getattr(config.ddpg, k) for k in EXECUTION_ONLY_DDPG_FIELDS},
-            }
-        )
-    else:
-        manifest = {
-            "experiment": config.name,
-            "created": now,
-            "config": config.to_dict(),
-            "lonlib_version": _versions()["lonlib"],
-            "git_commit": _git_commit(),
-            "versions": _versions(),
-            "host": platform.node(),
-            "sessions": [{"started": now}],
-        }
-    return manifest
-
-
-# ---------------------------------------------------------------------------- executors
+# ---------------------------------------------------------------------------- experiments
 def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]:
     """Runs that are not finished yet (reads every stored run; corrupt files raise)."""
     pending = []
@@ -321,12 +296,22 @@ def run_experiment(
     worker processes (one torch thread each). ``scheduler``: a Dask scheduler address, or
     ``"dask-local"`` for a LocalCluster of ``workers`` processes. A run whose worker dies is
     retried (up to ``max_attempts``) and resumes from its last stored local search.
+
+    Before any compute: ``out`` must exist or be creatable in an existing folder and accept
+    files (:class:`lonlib.store.DataWriteError` otherwise; on Dask, every worker checks it
+    too), and its stored runs must be readable. A run that another process is writing is
+    left to it and waited for once everything else is done; if its holder dies, this
+    process continues the run from what the holder stored.
     """
     check_range("workers", workers, 1, 4096)
+    check_range("max_attempts", max_attempts, 1, 1000)
     out = Path(out)
-    manifest = updated_manifest(config, out)
-    todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
-    write_json(out / "manifest.json", manifest)
+    check_output_folder(out)
+    with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
+        remove_temporary_files(out, manifest_path(out).name)
+        manifest = updated_manifest(config, out)
+        todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
+        write_json(manifest_path(out), manifest)
     total = len(config.perturbations) * config.runs
     bar = tqdm(
         total=total,
@@ -335,20 +320,52 @@ def run_experiment(
         disable=not progress,
         unit="run",
     )
-    try:
-        if not todo:
-            pass
-        elif scheduler is not None:
-            _run_dask(config, out, todo, workers, scheduler, bar, max_attempts)
-        elif workers <= 1:
-            for p, run in todo:
-                run_one(out, config, p, run)
-                _refresh(bar, out, done=1)
+    held: dict[tuple[float, int], str] = {}
+
+    def on_done(summary: dict[str, Any]) -> None:
+        if summary["held_by"] is None:
+            _refresh(bar, out, done=1)
         else:
-            _run_pool(config, out, todo, workers, bar, max_attempts)
+            held[summary["p"], summary["run"]] = summary["held_by"]
+
+    def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
+        execute_runs(
+            partial(run_one, out, config, wait=wait),
+            jobs,
+            on_done,
+            workers=workers,
+            scheduler=scheduler,
+            max_attempts=max_attempts,
+            key_prefix=config.name,
+            on_tick=lambda: _refresh(bar, out),
+            worker_check=partial(check_worker_sees_folder, str(out)),
+        )
+
+    try:
+        if todo:
+            execute(todo, wait=False)
+        if held:
+            names = "; ".join(f"p={p} run {run}: {who}" for (p, run), who in held.items())
+            log.warning("%s: waiting for runs another process is writing (%s)", out, names)
+            jobs = list(held)
+            held.clear()
+            execute(jobs, wait=True)
     finally:
         bar.close()
     return read_experiment_trials(out)
+
+
+def check_worker_sees_folder(out: str) -> None:
+    """On an executor's worker, before any compute: the experiment folder the client set up
+    is there (a worker without the shared file system would write elsewhere) and accepts
+    files. Raises :class:`lonlib.store.DataWriteError` naming the folder."""
+    if not manifest_path(Path(out)).exists():
+        raise DataWriteError(
+            errno.ENOENT,
+            f"cannot write {out}: this worker does not see the experiment's manifest there "
+            "(every worker needs the same folder, on a shared file system)",
+        )
+    check_output_folder(Path(out))
 
 
 def _refresh(bar: tqdm, out: Path, done: int = 0) -> None:
@@ -361,71 +378,11 @@ def _refresh(bar: tqdm, out: Path, done: int = 0) -> None:
         bar.set_postfix(local_searches=len(trials), best=f"{trials['fitness'].max():.3f}")
 
 
-def _run_pool(config, out, todo, workers, bar, max_attempts) -> None:
-    attempts = dict.fromkeys(todo, 0)
-    remaining = list(todo)
-    while remaining:
-        context = multiprocessing.get_context("spawn")
-        broken: list[tuple[float, int]] = []
-        with cf.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            futures = {pool.submit(run_one, out, config, p, run): (p, run) for p, run in remaining}
-            pending = set(futures)
-            while pending:
-                done, pending = cf.wait(pending, timeout=5, return_when=cf.FIRST_COMPLETED)
-                for future in done:
-                    key = futures[future]
-                    try:
-                        future.result()
-                        _refresh(bar, out, done=1)
-                    except cf.process.BrokenProcessPool:
-                        broken.append(key)
-                _refresh(bar, out)
-        for key in broken:
-            attempts[key] += 1
-            if attempts[key] >= max_attempts:
-                raise RuntimeError(f"run p={key[0]} run={key[1]} failed {max_attempts} times")
-        remaining = broken
-
-
-def _run_dask(config, out, todo, workers, scheduler, bar, max_attempts) -> None:
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler == "dask-local":
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-        )
-        client = Client(cluster)
-    else:
-        client = Client(scheduler, timeout="30s")
-    try:
-        futures = [
-            client.submit(
-                run_one,
-                str(out),
-                config,
-                p,
-                run,
-                key=f"{config.name}-{p}-{run}",
-                retries=max_attempts - 1,
-                pure=False,
-            )
-            for p, run in todo
-        ]
-        for future in as_completed(futures):
-            future.result()
-            _refresh(bar, out, done=1)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
 def status(out: str | Path) -> pd.DataFrame:
     """Per p: runs finished, started (interrupted or running), not started; local searches,
     best fitness. Reads the manifest for the planned runs."""
     out = Path(out)
-    manifest = read_json(out / "manifest.json")
+    manifest = read_json(manifest_path(out))
     config = ExperimentConfig.from_mapping(manifest["config"])
     rows = []
     for p in config.perturbations:

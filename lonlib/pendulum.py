@@ -96,12 +96,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 
-from lonlib.validation import check_choice, check_field_types, check_range
+from lonlib.validation import check_choice, check_field_types, check_keys, check_range
 
 SENSORS_PER_CART = 10
 SENSOR_MAX = 127.0
@@ -213,17 +213,16 @@ class PendulumConfig:
         outer = (self.n_carts - 1) * self.initial_spacing / 2 + self.cart_width / 2
         if outer + self.initial_noise >= self.track_half_length:
             raise ValueError(
-                f"initial_spacing {self.initial_spacing!r} puts the outer carts off the "
-                f"track (half-length {self.track_half_length:.3f} m for {self.n_carts} carts)"
+                f"the outer carts start off the track: (n_carts - 1) * initial_spacing / 2 "
+                f"+ cart_width / 2 + initial_noise = {outer + self.initial_noise:.3f} m must be "
+                f"< track_half_length_base + track_half_length_per_cart * (n_carts - 1) = "
+                f"{self.track_half_length:.3f} m"
             )
 
     @classmethod
     def from_mapping(cls, values: dict) -> PendulumConfig:
         """Build from a plain mapping (YAML, CLI), refusing unknown keys by name."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown PendulumConfig key(s) {unknown}; allowed: {sorted(known)}")
+        check_keys("env", values, cls)
         return cls(**values)
 
     @property

@@ -8,20 +8,25 @@ Layout::
         p=<p>/run_<run>/optimum_<i>.npz   accepted optimum i: theta, omega (float32, compressed)
         p=<p>/run_<run>/history_<i>.parquet  local search i's training curve (per episode)
 
-Every file is written to a temporary name in the same folder and renamed into place, so a
-reader never sees half a file. After each local search the optimum (if accepted) is written
-first and the trials table second: the table is the single source of truth, and a run's
-state (incumbent, failure count, end reason) is recomputed from it on resume. A file that
-cannot be read raises :class:`CorruptDataError` naming it; nothing is ever deleted.
+Every file is written to a temporary name in the same folder (``.<name>.<random>.tmp``),
+flushed to disk and renamed into place, so a reader never sees half a file; readers open
+exact names and never read a temporary. After each local search the history and optimum
+(if accepted) are written first and the trials table last: the table is the single source
+of truth, and a run's state (incumbent, failure count, end reason) is recomputed from it on
+resume. A file that cannot be read raises :class:`CorruptDataError` naming it; a file that
+cannot be written raises :class:`DataWriteError` naming it and the cause, leaving what was
+stored before unchanged. Nothing but temporaries is ever deleted.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import errno
+import io
 import json
 import os
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,25 +42,96 @@ class CorruptDataError(RuntimeError):
     """A stored file exists but cannot be read; the message names the file."""
 
 
-def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
-    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it into place."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(handle)
-    tmp_path = Path(tmp)
+class DataWriteError(OSError):
+    """A file could not be written (disk full, read-only folder, missing folder...). The
+    message names the file and the cause; ``errno`` is the cause's. What was stored before
+    is unchanged."""
+
+
+TEMPORARY_SUFFIX = ".tmp"
+
+
+def temporary_files(folder: Path, name: str = "*") -> list[Path]:
+    """Temporary files that writes of ``name`` (any file by default) left in ``folder``
+    when they were interrupted; never read as data."""
+    return sorted(Path(folder).glob(f".{name}.*{TEMPORARY_SUFFIX}"))
+
+
+def remove_temporary_files(folder: Path, name: str = "*") -> None:
+    """Delete what interrupted writes of ``name`` left in ``folder``. Call it only while
+    holding the lock that guards those writes (a live writer's file would vanish)."""
+    for path in temporary_files(folder, name):
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError as error:
+            raise write_error(path, error) from error
+
+
+def atomic_write(path: Path, data: bytes) -> None:
+    """Write ``data`` to a temporary file beside ``path``, flush it to disk, rename it into
+    place and flush the folder entry, so ``path`` holds either its old or its new content.
+
+    Raises :class:`DataWriteError` naming ``path`` and the cause (e.g. ENOSPC, EROFS); the
+    temporary file is removed where the file system still allows it.
+    """
+    path = Path(path)
+    tmp: Path | None = None
     try:
-        write(tmp_path)
-        with open(tmp_path, "rb") as stream:
-            os.fsync(stream.fileno())
-        os.replace(tmp_path, path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, name = tempfile.mkstemp(
+            prefix=f".{path.name}.", suffix=TEMPORARY_SUFFIX, dir=path.parent
+        )
+        tmp = Path(name)
+        try:
+            _write_all(handle, data)
+            os.fsync(handle)
+        finally:
+            os.close(handle)
+        os.replace(tmp, path)
+        tmp = None
+        _fsync_folder(path.parent)
+    except OSError as error:
+        raise write_error(path, error) from error
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        if tmp is not None:
+            with contextlib.suppress(OSError):  # a read-only folder keeps it; see temporary_files
+                tmp.unlink()
+
+
+def write_error(path: Path, error: OSError) -> DataWriteError:
+    """The :class:`DataWriteError` for ``error`` while writing ``path``."""
+    cause = error.strerror or str(error)
+    return DataWriteError(
+        error.errno,
+        f"cannot write {path}: {cause}. Files stored before are unchanged; fix the cause "
+        "(free space, permissions, mount) and run again to resume",
+    )
+
+
+def _write_all(handle: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        view = view[os.write(handle, view) :]
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Make a rename durable. Some file systems cannot sync a folder (EINVAL): the rename
+    itself has succeeded there, so that case is not an error."""
+    handle = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(handle)
+    except OSError as error:
+        if error.errno != errno.EINVAL:
+            raise
+    finally:
+        os.close(handle)
 
 
 def write_json(path: Path, payload: dict) -> None:
     """Atomically write ``payload`` as indented JSON."""
-    atomic_write(path, lambda tmp: tmp.write_text(json.dumps(payload, indent=2, default=str)))
+    atomic_write(path, json.dumps(payload, indent=2, default=str).encode())
 
 
 def read_json(path: Path) -> dict:
@@ -64,6 +140,36 @@ def read_json(path: Path) -> dict:
         return json.loads(path.read_text())
     except (OSError, ValueError) as error:
         raise CorruptDataError(f"{path}: cannot read JSON ({error})") from error
+
+
+def check_output_folder(out: Path) -> None:
+    """Before any compute: ``out`` exists or can be created inside an existing folder, and
+    accepts a new file. A missing parent is refused rather than created (a typo, or a shared
+    file system that is not mounted, would otherwise silently write elsewhere).
+
+    Raises :class:`DataWriteError` naming the folder and the cause.
+    """
+    out = Path(out)
+    if not out.parent.is_dir():
+        raise DataWriteError(
+            errno.ENOENT,
+            f"cannot write {out}: its parent folder {out.parent} does not exist "
+            "(a typo, or a file system that is not mounted?); create it first",
+        )
+    if out.exists() and not out.is_dir():
+        raise DataWriteError(errno.ENOTDIR, f"cannot write {out}: it is a file, not a folder")
+    try:
+        out.mkdir(exist_ok=True)
+        handle, name = tempfile.mkstemp(prefix=".write-check.", suffix=TEMPORARY_SUFFIX, dir=out)
+        os.close(handle)
+        os.unlink(name)
+    except OSError as error:
+        raise write_error(out, error) from error
+
+
+def parquet_bytes(table: pd.DataFrame) -> bytes:
+    """A table as Parquet file content."""
+    return table.to_parquet(None, index=False)
 
 
 def p_label(p: float) -> str:
@@ -98,26 +204,18 @@ def save_step(
     then the trials table (the commit point)."""
     last = trials[-1]
     if optimum is not None and optimum.history:
-        history = pd.DataFrame(optimum.history)
-        atomic_write(
-            history_path(root, p, run, last.index),
-            lambda tmp: history.to_parquet(tmp, index=False),
-        )
+        path = history_path(root, p, run, last.index)
+        atomic_write(path, parquet_bytes(pd.DataFrame(optimum.history)))
     if optimum is not None and last.accepted:
-        path = optimum_path(root, p, run, last.index)
-
-        def write_npz(tmp: Path) -> None:
-            with open(tmp, "wb") as stream:
-                np.savez_compressed(
-                    stream,
-                    theta=optimum.theta.astype(np.float32),
-                    omega=optimum.omega.astype(np.float32),
-                    fitness=np.float64(optimum.fitness),
-                )
-
-        atomic_write(path, write_npz)
-    table = trials_frame(p, run, trials)
-    atomic_write(trials_path(root, p, run), lambda tmp: table.to_parquet(tmp, index=False))
+        buffer = io.BytesIO()
+        np.savez_compressed(
+            buffer,
+            theta=optimum.theta.astype(np.float32),
+            omega=optimum.omega.astype(np.float32),
+            fitness=np.float64(optimum.fitness),
+        )
+        atomic_write(optimum_path(root, p, run, last.index), buffer.getvalue())
+    atomic_write(trials_path(root, p, run), parquet_bytes(trials_frame(p, run, trials)))
 
 
 def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:

@@ -13,17 +13,32 @@ import numpy as np
 
 
 def check_field_types(config: Any) -> None:
-    """Integers must be integers (not bools), numbers must be finite numbers."""
+    """Each field holds its annotated kind: integers are integers (not bools), numbers are
+    finite numbers, text is text, flags are bools. Other annotations are left to the class."""
     for f in fields(config):
         value = getattr(config, f.name)
-        if f.type in ("int", int):
+        kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+        if kind == "int":
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise ValueError(f"{f.name} must be an integer, got {value!r}")
-        elif f.type in ("float", float):
+        elif kind == "float":
             if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
                 raise ValueError(f"{f.name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ValueError(f"{f.name} must be finite, got {value!r}")
+            if not is_finite(value):
+                raise ValueError(f"{f.name} must be a finite number, got {value!r}")
+        elif kind == "str":
+            if not isinstance(value, str):
+                raise ValueError(f"{f.name} must be text, got {value!r}")
+        elif kind == "bool" and not isinstance(value, (bool, np.bool_)):
+            raise ValueError(f"{f.name} must be true or false, got {value!r}")
+
+
+def is_finite(value: float) -> bool:
+    """``math.isfinite`` that also answers (False) for integers too large for a float."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
 
 
 def check_range(
@@ -41,6 +56,16 @@ def check_range(
         lo = "-inf" if low is None else _number(low)
         hi = "inf" if high is None else _number(high)
         raise ValueError(f"{name} must be in {left}{lo}, {hi}], got {value!r}")
+
+
+def check_keys(section: str, values: dict, config_class: type) -> None:
+    """Every key of ``values`` is a field of ``config_class``; unknown keys are named."""
+    known = {f.name for f in fields(config_class)}
+    unknown = sorted((repr(k) for k in values if k not in known), key=str)
+    if unknown:
+        raise ValueError(
+            f"unknown {section} key(s) [{', '.join(unknown)}]; allowed: {sorted(known)}"
+        )
 
 
 def check_choice(name: str, value: Any, allowed: tuple) -> None:
