@@ -418,3 +418,32 @@ def test_a_free_rod_on_a_cart_at_constant_speed_keeps_its_energy_in_acceleration
         sim.step(np.full((1, 1), 0.5))  # zero command: zero acceleration
         assert abs(rod_energy() - e0)[0, 0] < 5e-3 * m * g * l  # bounded, symplectic
     assert sim.x_dot[0, 0] == 0.5
+
+
+def test_an_ended_episode_scores_and_earns_nothing_more():
+    # Rods start upright and "upright" is anything but exactly hanging: env 0 pushes into
+    # the track end and stops scoring there; env 1 never pushes and scores every step.
+    cfg = PendulumConfig(n_carts=1, steps=100, initial_angle=0.0, upright_angle=math.pi)
+    sim = CoupledPendulums(cfg, 2)
+    rewards = []
+    while not sim.done.all():
+        rewards.append(sim.step(np.array([[1.0], [0.5]])).reward)
+    ended_at = int(sim.step_count[0])
+    assert sim.end_reason.tolist() == [EndReason.BOUNDARY, EndReason.STEP_LIMIT]
+    assert ended_at < 100 and sim.fitness[0] == pytest.approx(ended_at / 100)
+    assert sim.fitness[1] == 1.0
+    assert all(r[0] == 0 for r in rewards[ended_at:])
+
+
+def test_the_termination_penalty_falls_on_a_true_end_only():
+    cfg = PendulumConfig(n_carts=1, steps=150, termination_penalty=-5.0)
+    sim = CoupledPendulums(cfg, 2)
+    last = [None, None]
+    while not sim.done.all():
+        running = ~sim.done
+        out = sim.step(np.array([[1.0], [0.5]]))  # env 0 hits the track end, env 1 times out
+        height = 0.5 * (1.0 + np.cos(sim.phi)).mean(axis=1)
+        for i in np.flatnonzero(running & (out.terminated | out.truncated)):
+            last[i] = (out.reward[i], height[i], bool(out.terminated[i]))
+    assert last[0][2] and last[0][0] == pytest.approx(last[0][1] - 5.0)
+    assert not last[1][2] and last[1][0] == pytest.approx(last[1][1])
