@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import platform
+import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +20,16 @@ def best_of(repeats: int, work: Callable[[], object]) -> float:
         work()
         times.append(time.perf_counter() - start)
     return min(times)
+
+
+def median_of(repeats: int, work: Callable[[], object]) -> tuple[float, float]:
+    """Median and smallest wall time of ``repeats`` calls of ``work`` [s]."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        work()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), min(times)
 
 
 def report(name: str, rows: list[dict]) -> Path:
