@@ -130,6 +130,7 @@ def test_full_lon_adds_rejected_optima_behind_worsening_edges():
     assert full.number_of_nodes() == 12
     assert sum(t == "worsening" for _, _, t in full.edges(data="type")) == 7
     assert full.nodes[node_id(1e-4, 0, 4)]["sink"] is False  # a rejected optimum is no sink
+    assert full.nodes[node_id(1e-4, 0, 3)]["sink"] is True  # worsening edges do not count
     assert full.nodes[node_id(1e-4, 0, 0)]["in_strength"] == 0
     assert full.nodes[node_id(1e-4, 0, 3)]["in_strength"] == 1
     monotone = mlon(full)
@@ -156,6 +157,7 @@ def test_sense_and_tolerance_are_explicit():
     assert edge_type(1.0, 2.0, "max", 0.0) == "improving"
     assert edge_type(1.0, 2.0, "min", 0.0) == "worsening"
     assert edge_type(1.0, 1.05, "max", 0.1) == "equal"
+    assert edge_type(1.0, 1.0, "min", 0.0) == "equal"
     assert edge_type(1.0, 1.05, "max", 0.01) == "improving"
     minimised = build_lon(HAND, sense="min")
     assert minimised.nodes[node_id(1e-4, 2, 0)]["best"]

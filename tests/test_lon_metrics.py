@@ -115,3 +115,11 @@ def test_every_metric_is_documented_with_its_graph():
     for metric in METRICS:
         row = rf"\| `{metric.name}` \| {metric.graph} \|"
         assert re.search(row, readme), f"README lacks the row of {metric.name}"
+
+
+def test_a_self_loop_added_by_hand_counts_as_self_returns(tmp_path):
+    lon = trace_lon(tmp_path, SELF_LOOP_ON_GLOBAL)
+    lon.add_edge("g", "g", type="equal", weight=2)
+    assert node_metrics(lon).loc["g", "self_returns"] == 5
+    m = lon_metrics(lon)
+    assert m["edges"] == 3 and m["self_returns"] == 6 and m["global_sinks"] == 1
