@@ -51,7 +51,11 @@ class FitnessSpreadWarning(UserWarning):
 
 def node_id(p: float, run: int, index: int) -> str:
     """Name of the optimum found by local search ``index`` of run ``run`` at strength ``p``."""
-    return f"p{p_label(p)}_r{run}_t{index}"
+    return _node_name(p_label(p), run, index)
+
+
+def _node_name(label: str, run: int, index: int) -> str:
+    return f"p{label}_r{run}_t{index}"
 
 
 def edge_types(f_from: np.ndarray, f_to: np.ndarray, sense: str, tolerance: float) -> np.ndarray:
@@ -96,11 +100,11 @@ def build_lon(
     labels = {p: p_label(p) for p in rows["p"].unique()}
     p, run, index = (rows[c].to_numpy() for c in ("p", "run", "index"))
     parent = rows["parent"].to_numpy()
-    names = [f"p{labels[a]}_r{b}_t{c}" for a, b, c in zip(p, run, index, strict=True)]
+    names = [_node_name(labels[a], b, c) for a, b, c in zip(p, run, index, strict=True)]
     run_keys = np.array([f"{labels[a]}:{b}" for a, b in zip(p, run, strict=True)], dtype=object)
     position = pd.Index(names)
     child = np.flatnonzero(parent >= 0)
-    parents = [f"p{labels[p[i]]}_r{run[i]}_t{parent[i]}" for i in child]
+    parents = [_node_name(labels[p[i]], run[i], parent[i]) for i in child]
     source = position.get_indexer(parents)
     if (source < 0).any():
         missing = parents[int(np.argmax(source < 0))]
@@ -317,6 +321,19 @@ class GraphArrays:
         """Best fitness among the accepted optima (None when there are none)."""
         return _best(self.fitness[self.accepted], self.sense)
 
+    @property
+    def sinks(self) -> np.ndarray:
+        """Mask of the MLON's sinks: accepted optima without an outgoing MLON edge."""
+        leaving = np.bincount(self.source[self.monotone], minlength=len(self.names))
+        return self.accepted & (leaving == 0)
+
+    def at_best(self, values: np.ndarray) -> np.ndarray:
+        """Mask of ``values`` equal to the best fitness within the tolerance."""
+        best = self.best
+        if best is None:
+            return np.zeros(np.shape(values), bool)
+        return np.abs(np.asarray(values) - best) <= self.tolerance
+
 
 def graph_arrays(graph: nx.DiGraph) -> GraphArrays:
     """The arrays view of ``graph`` (edge types recomputed from fitness, sense, tolerance)."""
@@ -369,8 +386,7 @@ def sinks(graph: nx.DiGraph) -> list[str]:
     """MLON sinks (the paper's ends of monotonic sequences): accepted optima without an
     outgoing non-worsening edge. Self-returns are no edges, so they never hide a sink."""
     arrays = graph_arrays(graph)
-    leaves = np.bincount(arrays.source[arrays.monotone], minlength=len(arrays.names)) == 0
-    return [arrays.names[i] for i in np.flatnonzero(arrays.accepted & leaves)]
+    return [arrays.names[i] for i in np.flatnonzero(arrays.sinks)]
 
 
 # ---------------------------------------------------------------------------- CMLON
@@ -480,16 +496,13 @@ def cmlon(graph: nx.DiGraph) -> nx.DiGraph:
     )
     sink = np.zeros(len(names), bool)
     sink[c.funnels] = True
-    best = arrays.best
     columns = {
         "fitness": c.fitness,
         "size": c.size,
         "members": [sorted(group.tolist()) for group in groups],
         "in_strength": c.in_strength.astype(int),
         "sink": sink,
-        "best": np.zeros(len(names), bool)
-        if best is None
-        else np.abs(c.fitness - best) <= arrays.tolerance,
+        "best": arrays.at_best(c.fitness),
     }
     edges = (
         (names[a], names[b], {"type": "improving", "weight": int(w)})

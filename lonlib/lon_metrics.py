@@ -17,7 +17,15 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 
-from lonlib.lon import EQUAL, WORSENING, Compressed, build_lon, compress, graph_arrays
+from lonlib.lon import (
+    EQUAL,
+    IMPROVING,
+    WORSENING,
+    Compressed,
+    build_lon,
+    compress,
+    graph_arrays,
+)
 
 
 @dataclass(frozen=True)
@@ -73,21 +81,17 @@ def lon_metrics(graph: nx.DiGraph) -> dict[str, float]:
     (for instance strengths when no funnel has an incoming edge).
     """
     arrays = graph_arrays(graph)
-    tol = arrays.tolerance
     best = arrays.best
     best_value = np.nan if best is None else best
     n_optima = int(arrays.accepted.sum())
-    monotone = arrays.monotone
-    out_edges = np.bincount(arrays.source[monotone], minlength=len(arrays.names))
-    sink = arrays.accepted & (out_edges == 0)
-    at_best = np.abs(arrays.fitness - best_value) <= tol
-    plateau_edges = monotone & (arrays.kind == EQUAL)
+    sink = arrays.sinks
+    plateau_edges = arrays.monotone & (arrays.kind == EQUAL)
     on_plateau = np.zeros(len(arrays.names), bool)
     on_plateau[arrays.source[plateau_edges]] = True
     on_plateau[arrays.target[plateau_edges]] = True
     compressed = compress(arrays)
     funnels = compressed.funnels
-    global_funnels = funnels[np.abs(compressed.fitness[funnels] - best_value) <= tol]
+    global_funnels = funnels[arrays.at_best(compressed.fitness[funnels])]
     strength = compressed.in_strength
     ends = np.array(
         [graph.nodes[n]["fitness"] for n in graph.graph.get("run_ends", {}).values()], float
@@ -95,12 +99,12 @@ def lon_metrics(graph: nx.DiGraph) -> dict[str, float]:
     return {
         "optima": n_optima,
         "edges": len(arrays.kind),
-        "improving": int((arrays.kind == 0).sum()),
+        "improving": int((arrays.kind == IMPROVING).sum()),
         "equal": int((arrays.kind == EQUAL).sum()),
         "worsening": int((arrays.kind == WORSENING).sum()),
         "self_returns": int(arrays.self_returns.sum()),
         "sinks": int(sink.sum()),
-        "global_sinks": int((sink & at_best).sum()),
+        "global_sinks": int((sink & arrays.at_best(arrays.fitness)).sum()),
         "neutral_optima": _ratio(int((on_plateau & arrays.accepted).sum()), n_optima),
         "cmlon_nodes": len(compressed.fitness),
         "neutral": 1.0 - _ratio(len(compressed.fitness), n_optima) if n_optima else np.nan,
@@ -111,7 +115,7 @@ def lon_metrics(graph: nx.DiGraph) -> dict[str, float]:
         "global_funnel_proportion": _ratio(
             len(_basin(compressed, global_funnels)), len(compressed.fitness)
         ),
-        "success": float(np.mean(np.abs(ends - best_value) <= tol)) if ends.size else np.nan,
+        "success": float(np.mean(arrays.at_best(ends))) if ends.size else np.nan,
         "deviation": float(np.mean(np.abs(ends - best_value))) if ends.size else np.nan,
         "best": best_value,
         "runs": int(ends.size),
@@ -127,11 +131,11 @@ def _cmlon_igraph(compressed: Compressed) -> igraph.Graph:
     return igraph.Graph(n=len(compressed.fitness), edges=edges.tolist(), directed=True)
 
 
-def _basin(compressed: Compressed, targets: np.ndarray, graph: igraph.Graph | None = None):
+def _basin(compressed: Compressed, targets: np.ndarray) -> set[int]:
     """CMLON nodes from which any of ``targets`` is reachable (the targets included)."""
     if len(targets) == 0:
         return set()
-    graph = graph or _cmlon_igraph(compressed)
+    graph = _cmlon_igraph(compressed)
     reach = graph.neighborhood(targets.tolist(), order=graph.vcount(), mode="in")
     return set().union(*reach)
 
@@ -144,16 +148,14 @@ def node_metrics(graph: nx.DiGraph) -> pd.DataFrame:
     ``best`` (at the best fitness within the tolerance)."""
     arrays = graph_arrays(graph)
     n = len(arrays.names)
-    monotone = arrays.monotone
-    best = arrays.best
     return pd.DataFrame(
         {
             "fitness": arrays.fitness,
             "in_strength": np.bincount(arrays.target, arrays.weight, n).astype(int),
             "out_degree": np.bincount(arrays.source, minlength=n),
             "self_returns": arrays.self_returns,
-            "sink": arrays.accepted & (np.bincount(arrays.source[monotone], minlength=n) == 0),
-            "best": np.abs(arrays.fitness - (np.nan if best is None else best)) <= arrays.tolerance,
+            "sink": arrays.sinks,
+            "best": arrays.at_best(arrays.fitness),
         },
         index=pd.Index(arrays.names, name="node"),
     )
@@ -172,14 +174,12 @@ def funnel_metrics(graph: nx.DiGraph) -> pd.DataFrame:
     reach = _cmlon_igraph(compressed).neighborhood(
         funnels.tolist(), order=len(compressed.fitness), mode="in"
     )
-    best = arrays.best
     names = compressed.names
     return pd.DataFrame(
         {
             "fitness": compressed.fitness[funnels],
             "size": compressed.size[funnels],
-            "global": np.abs(compressed.fitness[funnels] - (np.nan if best is None else best))
-            <= arrays.tolerance,
+            "global": arrays.at_best(compressed.fitness[funnels]),
             "in_strength": compressed.in_strength[funnels].astype(int),
             "basin_nodes": [len(r) for r in reach],
             "basin_share": [len(r) / len(compressed.fitness) for r in reach],
