@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import median_of, report
+from benchmarks.common import median_times, report
 from lonlib.lon import cmlon
 from lonlib.lon_io import from_trace
 from lonlib.lon_metrics import funnel_metrics, lon_metrics, node_metrics
@@ -47,7 +47,8 @@ def generated_trace(
 
 
 def main(repeats: int = 31) -> None:
-    """Time the whole analysis and its stages; report medians beside the target."""
+    """Time the whole analysis and its stages; report medians beside the target (wall time;
+    the CPU time beside it is what the work costs when other jobs share the cores)."""
     with tempfile.TemporaryDirectory() as folder, warnings.catch_warnings():
         warnings.simplefilter("ignore")
         path = Path(folder) / "generated.trace"
@@ -68,19 +69,27 @@ def main(repeats: int = 31) -> None:
             "node_metrics + funnel_metrics": lambda: (node_metrics(graph), funnel_metrics(graph)),
         }
         everything()  # warm caches and imports
-        median, fastest = median_of(repeats, everything)
+        median, fastest, cpu = median_times(repeats, everything)
         rows = [
             {
                 "measure": "3000-row trace: build + CMLON + all metrics [ms]",
                 "median": median * 1e3,
                 "min": fastest * 1e3,
+                "CPU median": cpu * 1e3,
                 "target": TARGET_MS,
-                "met": "yes" if median * 1e3 <= TARGET_MS else "NO",
+                "met (median)": "yes" if median * 1e3 <= TARGET_MS else "NO",
             }
         ]
         for name, work in stages.items():
-            median, fastest = median_of(repeats, work)
-            rows.append({"measure": f"  {name} [ms]", "median": median * 1e3, "min": fastest * 1e3})
+            median, fastest, cpu = median_times(repeats, work)
+            rows.append(
+                {
+                    "measure": f"  {name} [ms]",
+                    "median": median * 1e3,
+                    "min": fastest * 1e3,
+                    "CPU median": cpu * 1e3,
+                }
+            )
     m = lon_metrics(graph)
     rows.append(
         {
