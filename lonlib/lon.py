@@ -161,24 +161,18 @@ def lon_from_transitions(
     pairs = np.column_stack([node1, node2])
     codes, names = pd.factorize(pairs.ravel())  # nodes in order of first appearance
     values = np.column_stack([transitions["fit1"], transitions["fit2"]]).astype(float).ravel()
-    fitness = _aggregate_fitness(codes, values, len(names), sense, max_fitness_spread, names)
+    fitness = _aggregate_fitness(codes, values, names, sense, max_fitness_spread, source)
     src, dst = codes[0::2], codes[1::2]
     runs = np.array([str(r) for r in transitions["run"]], dtype=object)
-    run_codes, run_names = pd.factorize(runs)
     kind = edge_types(fitness[src], fitness[dst], sense, tolerance)
     accepted = np.zeros(len(names), bool)
     accepted[src] = True
     accepted[dst[kind != WORSENING]] = True
     first_row = np.full(len(names), m)
     np.minimum.at(first_row, codes, np.repeat(np.arange(m), 2))
-    run_first = np.full(len(run_names), m)
-    np.minimum.at(run_first, run_codes, np.arange(m))
+    run_names, starts, ends = _run_starts_and_ends(runs, src, dst, kind)
     start = np.zeros(len(names), bool)
-    start[src[run_first]] = True
-    run_last = np.full(len(run_names), -1)
-    moved = np.flatnonzero(kind != WORSENING)
-    np.maximum.at(run_last, run_codes[moved], moved)
-    ends = np.where(run_last >= 0, dst[np.maximum(run_last, 0)], src[run_first])
+    start[starts] = True
     nodes = {
         "fitness": fitness,
         "run": runs[first_row] if m else np.array([], object),
@@ -196,25 +190,40 @@ def lon_from_transitions(
     )
 
 
+def _run_starts_and_ends(
+    runs: np.ndarray, src: np.ndarray, dst: np.ndarray, kind: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each run's label, start node (``node1`` of its first row) and end node (``node2`` of
+    its last non-worsening row, else its start)."""
+    run_codes, run_names = pd.factorize(runs)
+    rows = np.arange(len(runs))
+    first = np.full(len(run_names), len(runs))
+    np.minimum.at(first, run_codes, rows)
+    last = np.full(len(run_names), -1)
+    moved = rows[kind != WORSENING]
+    np.maximum.at(last, run_codes[moved], moved)
+    starts = src[first]
+    return run_names, starts, np.where(last >= 0, dst[np.maximum(last, 0)], starts)
+
+
 def _aggregate_fitness(
     codes: np.ndarray,
     values: np.ndarray,
-    n: int,
+    names: np.ndarray,
     sense: str,
     max_spread: float | None,
-    names: Iterable[str],
+    source: str,
 ) -> np.ndarray:
     """Each node's best value; warn on (and, past ``max_spread``, refuse) differing values."""
-    low, high = np.full(n, np.inf), np.full(n, -np.inf)
+    low, high = np.full(len(names), np.inf), np.full(len(names), -np.inf)
     np.minimum.at(low, codes, values)
     np.maximum.at(high, codes, values)
     spread = high - low
-    if n and spread.max() > 0:
+    if len(names) and spread.max() > 0:
         worst = int(np.argmax(spread))
-        name, several = list(names)[worst], int((spread > 0).sum())
         message = (
-            f"{several} node(s) seen with several fitness values; the largest spread is "
-            f"{spread[worst]:.3g} (node {name})"
+            f"{source}: {int((spread > 0).sum())} node(s) seen with several fitness values; "
+            f"the largest spread is {spread[worst]:.3g} (node {names[worst]})"
         )
         if max_spread is not None and spread[worst] > max_spread:
             raise ValueError(f"{message}, above max_fitness_spread={max_spread:g}")
