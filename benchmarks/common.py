@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import platform
+import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +20,18 @@ def best_of(repeats: int, work: Callable[[], object]) -> float:
         work()
         times.append(time.perf_counter() - start)
     return min(times)
+
+
+def median_times(repeats: int, work: Callable[[], object]) -> tuple[float, float, float]:
+    """Median and smallest wall time, and median CPU time, of ``repeats`` calls of ``work``
+    [s]. On a shared machine the CPU time shows the work without the waiting for a core."""
+    wall, cpu = [], []
+    for _ in range(repeats):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        work()
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
+    return statistics.median(wall), min(wall), statistics.median(cpu)
 
 
 def report(name: str, rows: list[dict]) -> Path:

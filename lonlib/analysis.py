@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 
 from lonlib.experiment import ExperimentConfig
-from lonlib.lon import build_lon, lon_metrics, sinks
+from lonlib.lon import build_lon, sinks
+from lonlib.lon_metrics import lon_metrics
 from lonlib.peaks import compare_with_paper, detect_peaks
 from lonlib.plots import fitness_histogram, lon_3d, lon_3d_html, optima_boxplot, sensitivity
 from lonlib.record import record, recording_name

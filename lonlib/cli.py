@@ -37,7 +37,9 @@ def _status(args: argparse.Namespace) -> None:
 
 
 def _lon(args: argparse.Namespace) -> None:
-    from lonlib.lon import build_lon, cmlon, metrics_table, to_graphml, to_trace
+    from lonlib.lon import build_lon, cmlon
+    from lonlib.lon_io import to_graphml, to_trace
+    from lonlib.lon_metrics import metrics_table
     from lonlib.store import read_experiment_trials
 
     root = Path(args.dir)

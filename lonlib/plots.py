@@ -15,7 +15,7 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 
-from lonlib.lon import to_igraph
+from lonlib.lon_io import to_igraph
 from lonlib.peaks import PAPER_PEAKS, detect_peaks
 from lonlib.store import p_label
 
