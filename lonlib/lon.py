@@ -119,6 +119,8 @@ def build_lon(
         "start": parent < 0,
         "accepted": accepted,
     }
+    if "label" in rows:  # behaviour labels (lonlib.behaviour), where the trials carry them
+        nodes["label"] = rows["label"].fillna("").astype(str).to_numpy(object)
     return _assemble(
         names,
         nodes,

@@ -134,3 +134,41 @@ def test_an_actor_is_described_by_its_flat_parameters():
         0
     ]
     assert d.fitness == pytest.approx(policy_fitness)
+
+
+def labelled_trials():
+    """Two runs: run 0 hops between two spinning optima of equal fitness, then to a better
+    balancing one; run 1 reaches a spinning optimum of the same fitness and returns to it."""
+    rows = [
+        # p, run, index, parent, fitness, accepted, label
+        (1e-4, 0, 0, -1, 0.25, True, "spinning"),
+        (1e-4, 0, 1, 0, 0.25, True, "spinning"),
+        (1e-4, 0, 2, 1, 0.10, False, "swinging high"),
+        (1e-4, 0, 3, 1, 0.80, True, "balancing"),
+        (1e-4, 1, 0, -1, 0.05, True, "swinging high"),
+        (1e-4, 1, 1, 0, 0.25, True, "spinning"),
+        (1e-4, 1, 2, 1, 0.25, True, "spinning (in phase)"),
+    ]
+    columns = ["p", "run", "index", "parent", "fitness", "accepted", "label"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def test_behavioural_lon_contracts_same_label_equal_fitness_optima():
+    from lonlib.behaviour_lon import behavioural_lon
+    from lonlib.lon import build_lon
+    from lonlib.lon_metrics import lon_metrics
+
+    lon = build_lon(labelled_trials(), full=True)
+    assert lon.nodes["p0.0001_r0_t0"]["label"] == "spinning"
+    blon = behavioural_lon(lon)
+    by_label = {d["label"]: (n, d) for n, d in blon.nodes(data=True) if d["accepted"]}
+    spin_name, spin = by_label["spinning"]
+    # three spinning optima at 0.25, from two runs, are one node; the in-phase one is not
+    assert spin["size"] == 3 and spin["fitness"] == 0.25
+    assert spin["self_returns"] == 1  # r0_t0 -> r0_t1 inside the node
+    assert by_label["spinning (in phase)"][1]["size"] == 1
+    assert blon.has_edge(spin_name, by_label["balancing"][0])
+    assert blon.has_edge(by_label["swinging high"][0], spin_name)
+    assert blon.number_of_nodes() == 5  # + the rejected swinging-high optimum
+    metrics = lon_metrics(blon)
+    assert metrics["optima"] == 4 and metrics["sinks"] == 2
