@@ -89,3 +89,37 @@ def behavioural_lon(graph: nx.DiGraph) -> nx.DiGraph:
     out = _assemble(names, nodes, hops, run_ends, arrays.sense, arrays.tolerance)
     out.graph["behavioural"] = True
     return out
+
+
+def behaviour_table(trials: pd.DataFrame, tolerance: float = 1e-9) -> pd.DataFrame:
+    """The "typical behaviours" table: per p and label, the accepted optima, the sinks
+    (ends of monotonic sequences, on the MLON), their fitness range and the label's share
+    of all sinks at that p. Rows are sorted by p, then by best fitness (descending)."""
+    from lonlib.lon import build_lon, node_id, sinks
+
+    if "label" not in trials:
+        raise ValueError("trials carry no behaviour labels (no 'label' column)")
+    rows = []
+    for p, group in trials.groupby("p", sort=True):
+        graph = build_lon(group, sense="max", tolerance=tolerance)
+        sink_set = set(sinks(graph))
+        accepted = group[group["accepted"].astype(bool)]
+        names = [node_id(p, r, i) for r, i in zip(accepted["run"], accepted["index"], strict=True)]
+        is_sink = pd.Series([name in sink_set for name in names], index=accepted.index)
+        for label, members in accepted.groupby("label", sort=False):
+            fitness = members["fitness"]
+            rows.append(
+                {
+                    "p": p,
+                    "label": label,
+                    "optima": len(members),
+                    "sinks": int(is_sink[members.index].sum()),
+                    "fitness_min": fitness.min(),
+                    "fitness_max": fitness.max(),
+                    "sink_share": is_sink[members.index].sum() / max(len(sink_set), 1),
+                }
+            )
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return table
+    return table.sort_values(["p", "fitness_max"], ascending=[True, False], ignore_index=True)

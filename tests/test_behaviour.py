@@ -172,3 +172,19 @@ def test_behavioural_lon_contracts_same_label_equal_fitness_optima():
     assert blon.number_of_nodes() == 5  # + the rejected swinging-high optimum
     metrics = lon_metrics(blon)
     assert metrics["optima"] == 4 and metrics["sinks"] == 2
+
+
+def test_behaviour_table_counts_optima_and_sinks_per_label():
+    from lonlib.behaviour_lon import behaviour_table
+
+    table = behaviour_table(labelled_trials()).set_index("label")
+    assert list(table.index) == [
+        "balancing",
+        "spinning",
+        "spinning (in phase)",
+        "swinging high",
+    ]
+    assert table.loc["spinning", "optima"] == 3 and table.loc["spinning", "sinks"] == 0
+    assert table.loc["balancing", "sinks"] == 1 and table.loc["balancing", "sink_share"] == 0.5
+    assert table["sinks"].sum() == 2  # r0 ends at balancing, r1 at the in-phase spinner
+    assert table.loc["swinging high", "optima"] == 1  # the rejected one is no optimum
