@@ -75,7 +75,8 @@ class SwingUpBalanceController:
     Works in cart-acceleration space: pumping asks ``x_ddot = k (E - E_up) theta_dot cos``;
     near upright an LQR on the linearised rod ``(theta, theta_dot, x_dot)`` takes over.
     The desired acceleration becomes a motor action through the exact inverse dynamics of
-    the configured motor (force or acceleration) and is clipped to what the motor can do.
+    the configured motor (force, acceleration, or the speed command ``x_dot + tau x_ddot``
+    of the velocity servo) and is clipped to what the motor can do.
     It sees only the sensors, so cart position is known only near neighbours and track ends.
     """
 

@@ -430,7 +430,7 @@ def rod_energy_drift(integrator):
         energy = (2 / 3) * m * l**2 * sim.phi_dot**2 + m * g * l * np.cos(sim.phi)
         drift.append(energy[0, 0])
         sim.step(np.full((1, 1), 0.75))  # u = -1: 1 m/s to the right, the speed it has
-    assert sim.x_dot[0, 0] == 1.0 and not sim.end_reason[0] == EndReason.BOUNDARY
+    assert sim.x_dot[0, 0] == 1.0 and sim.end_reason[0] != EndReason.BOUNDARY
     drift = np.abs(np.array(drift) - drift[0])
     return drift[:500].max(), drift[-500:].max()
 
