@@ -145,16 +145,18 @@ def constant_actor(action: float, n_carts: int = 1) -> np.ndarray:
 
 
 def test_greedy_rollout_reports_end_step_and_cart_range():
-    env = PendulumConfig(n_carts=1, motor="velocity", motor_tau=0.02, integrator="semi-implicit")
-    rows = greedy_rollout(np.stack([constant_actor(1 - 1e-9), constant_actor(0.5)]), env)
-    # full speed right from the first step: x = 0.04 k; the edge passes 2.4 m at k = 58
+    env = PendulumConfig(n_carts=2, motor="velocity", motor_tau=0.02, integrator="semi-implicit")
+    rows = greedy_rollout(np.stack([constant_actor(1 - 1e-9, 2), constant_actor(0.5, 2)]), env)
+    # both carts at full speed right from the first step: x = x0 + 0.04 k; the right cart
+    # (x0 = 0.55 m) passes the 2.95 m track end with its edge at k = 58
     push = rows.iloc[0]
     assert (push["end_reason"], push["end_step"]) == ("boundary", 58)
     assert push["cart_range_0"] == pytest.approx(0.04 * 58)
+    assert push["cart_range_1"] == pytest.approx(0.04 * 58)
     assert push["behaviour"] == "ends early"
-    still = rows.iloc[1]  # never moves: the rod hangs all episode
+    still = rows.iloc[1]  # never moves: the rods hang all episode
     assert (still["end_reason"], still["end_step"]) == ("step_limit", 2000)
-    assert still["cart_range_0"] == 0.0 and abs(still["turns_0"]) < 1e-9
+    assert still["cart_range_0"] == 0.0 and abs(still["turns_1"]) < 1e-9
     assert still["upright_share_0"] == 0.0 and still["behaviour"] == "hangs"
 
 
@@ -169,9 +171,12 @@ def test_upright_share_counts_only_the_steps_an_episode_ran():
         initial_angle=0.0,
         track_half_length_base=0.5,
     )
-    row = greedy_rollout(constant_actor(1 - 1e-9)[None], env).iloc[0]
+    # batched with an Actor that never pushes, so the rollout goes on after the first ends
+    rows = greedy_rollout(np.stack([constant_actor(1 - 1e-9), constant_actor(0.5)]), env)
+    row = rows.iloc[0]
     assert row["end_reason"] == "boundary" and 100 < row["end_step"] < 2000
     assert row["upright_share_0"] == row["end_step"] / 2000 == row["rollout_fitness"]
+    assert rows.iloc[1]["upright_share_0"] == 1.0
 
 
 def test_net_turns_are_signed_and_survive_wrapping():
@@ -186,6 +191,7 @@ def test_net_turns_are_signed_and_survive_wrapping():
         ("collision", (0.9, 0.9), (0.1, 0.1), "ends early"),
         ("step_limit", (0.9, 0.6), (0.5, -0.9), "balances"),
         ("step_limit", (0.9, 0.4), (0.5, -0.9), "swings"),
+        ("step_limit", (0.9, 0.6), (0.5, -1.5), "swings"),
         ("step_limit", (0.5, 0.5), (0.5, -2.0), "spins"),
         ("step_limit", (0.0, 0.0), (0.3, -0.5), "hangs"),
     ],
