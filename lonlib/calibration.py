@@ -289,6 +289,17 @@ def load_calibration(spec: str | Path) -> CalibrationConfig:
     return CalibrationConfig.from_mapping(values)
 
 
+def with_overrides(
+    config: CalibrationConfig,
+    seeds: int | None = None,
+    max_steps: int | None = None,
+    batch_size: int | None = None,
+) -> CalibrationConfig:
+    """``config`` with the given seeds, budget and batch (None keeps the grid's own)."""
+    changes = {"seeds": seeds, "max_steps": max_steps, "batch_size": batch_size}
+    return dataclasses.replace(config, **{k: v for k, v in changes.items() if v is not None})
+
+
 # ---------------------------------------------------------------------------- rollouts
 def greedy_rollout(thetas: np.ndarray, env: PendulumConfig, seed: int = 0) -> pd.DataFrame:
     """What each Actor (row of ``thetas [k, P]``) does in one greedy episode, all ``k``
@@ -677,5 +688,6 @@ __all__ = [
     "run_calibration",
     "run_cell",
     "search_table",
+    "with_overrides",
     "write_outputs",
 ]

@@ -61,20 +61,9 @@ def _lon(args: argparse.Namespace) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> None:
-    from lonlib.calibration import load_calibration, run_calibration
+    from lonlib.calibration import load_calibration, run_calibration, with_overrides
 
-    config = load_calibration(args.grid)
-    changes = {
-        key: value
-        for key, value in (
-            ("seeds", args.seeds),
-            ("max_steps", args.max_steps),
-            ("batch_size", args.batch),
-        )
-        if value is not None
-    }
-    if changes:
-        config = dataclasses.replace(config, **changes)  # validated again on construction
+    config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
     result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(result.cells.drop(columns=["seconds"]).to_string(index=False))

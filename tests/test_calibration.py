@@ -235,3 +235,13 @@ def test_yaml_grid_and_validation(tmp_path):
         CalibrationConfig(seeds=0)
     with pytest.raises(ValueError, match="tiny"):
         load_calibration("huge")
+
+
+def test_notebook_runs_the_tiny_grid(tmp_path):
+    from tests.test_notebooks import execute
+
+    out = tmp_path / "study"
+    execute("calibrate_physics", tmp_path, grid="tiny", max_steps=120, workers=1, out=str(out))
+    cells = pd.read_csv(out / "calibration.csv")
+    assert len(cells) == 2 and (cells["searches"] == 2).all()
+    assert (out / "calibration.png").stat().st_size > 0
