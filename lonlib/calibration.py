@@ -43,7 +43,6 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-import yaml
 from tqdm.auto import tqdm
 
 from lonlib.ddpg import DDPGConfig, local_search_batch
@@ -56,7 +55,7 @@ from lonlib.pendulum import (
     wrap_angle,
 )
 from lonlib.store import atomic_write, read_json, write_json
-from lonlib.validation import check_choice, check_field_types, check_range
+from lonlib.validation import check_choice, check_field_types, check_range, read_yaml_mapping
 
 MOTORS = ("force", "acceleration", "velocity")
 INTEGRATORS = ("euler", "semi-implicit")
@@ -154,6 +153,14 @@ def grid(
     )
 
 
+DEFAULT_CELLS = grid(force_gains=(1.0, 5.0), velocity_taus=(0.02, 0.1)) + (
+    Cell("velocity", "semi-implicit", motor_tau=0.02, reward="slow-height"),
+)
+"""Every motor with both integrators and the ``height`` reward (force at 2 N and 10 N,
+acceleration at +-2 m/s^2, velocity at tau = 0.02 s and 0.1 s), plus the velocity motor
+(tau = 0.02 s, semi-implicit) with the ``slow-height`` reward: 11 cells."""
+
+
 @dataclass(frozen=True)
 class CalibrationConfig:
     """A calibration study: the grid, the seeds per cell and the DDPG budget.
@@ -164,7 +171,7 @@ class CalibrationConfig:
     """
 
     name: str = "default"
-    cells: tuple[Cell, ...] = field(default_factory=grid)
+    cells: tuple[Cell, ...] = DEFAULT_CELLS
     seeds: int = 3
     seed: int = 0
     max_steps: int = 150_000
@@ -175,7 +182,10 @@ class CalibrationConfig:
 
     def __post_init__(self) -> None:
         check_field_types(self)
-        if not self.name.replace("-", "").replace("_", "").isalnum():
+        if (
+            not isinstance(self.name, str)
+            or not self.name.replace("-", "").replace("_", "").isalnum()
+        ):
             raise ValueError(f"name must be letters, digits, '-' or '_', got {self.name!r}")
         if not self.cells or not all(isinstance(c, Cell) for c in self.cells):
             raise ValueError("cells must list at least one Cell")
@@ -248,15 +258,12 @@ class CalibrationConfig:
 
 
 def named_calibration(name: str) -> CalibrationConfig:
-    """``default``: 11 cells x 3 seeds x 150k env steps at batch 256 on two carts (every
-    motor with both integrators; the force motor at 2 N and 10 N, the velocity motor at
-    tau = 0.02 s and 0.1 s; plus the slow-height reward on the velocity motor).
+    """``default``: the 11 :data:`DEFAULT_CELLS` x 3 seeds x 150k env steps at batch 256 on
+    two carts.
     ``tiny``: two cells on one cart with 50-step episodes and 400 env steps per search,
     for tests (seconds)."""
     if name == "default":
-        cells = grid(force_gains=(1.0, 5.0), velocity_taus=(0.02, 0.1))
-        cells += (Cell("velocity", "semi-implicit", motor_tau=0.02, reward="slow-height"),)
-        return CalibrationConfig(name="default", cells=cells)
+        return CalibrationConfig()
     if name == "tiny":
         return CalibrationConfig(
             name="tiny",
@@ -279,14 +286,7 @@ def load_calibration(spec: str | Path) -> CalibrationConfig:
     path = Path(spec)
     if not path.is_file():
         raise ValueError(f"calibration grid {spec!r} is neither 'default', 'tiny' nor a file")
-    try:
-        values = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as error:
-        raise ValueError(f"{path}: not valid YAML ({error})") from None
-    if not isinstance(values, dict):
-        raise ValueError(f"{path}: expected a mapping of calibration keys")
-    values.setdefault("name", path.stem)
-    return CalibrationConfig.from_mapping(values)
+    return CalibrationConfig.from_mapping(read_yaml_mapping(path, "calibration"))
 
 
 def with_overrides(
@@ -674,6 +674,7 @@ def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResu
 
 __all__ = [
     "CELL_COLUMNS",
+    "DEFAULT_CELLS",
     "CalibrationConfig",
     "CalibrationResult",
     "Cell",
