@@ -575,12 +575,13 @@ def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) ->
     so far against env steps, one line per search, one colour per cell."""
     names = [record["name"] for record in records]
     fig, (left, right) = plt.subplots(
-        1, 2, figsize=(12, 1.2 + 0.45 * len(names)), gridspec_kw={"width_ratios": [1, 1.4]}
+        1, 2, figsize=(13, max(3.5, 1.5 + 0.4 * len(names))), gridspec_kw={"width_ratios": [1, 1]}
     )
     colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
     for row, (name, colour) in enumerate(zip(names, colours, strict=False)):
         group = searches[searches["cell"] == name]
-        left.scatter(group["best_fitness"], np.full(len(group), row), color=colour, s=30)
+        offsets = 0.15 * (np.arange(len(group)) - (len(group) - 1) / 2)  # seeds side by side
+        left.scatter(group["best_fitness"], row + offsets, color=colour, s=25)
         share = (group["best_fitness"] > 0).mean()
         left.annotate(f"{share:.0%} left 0", (1.0, row), fontsize=7, va="center", ha="right")
     for record, colour in zip(records, colours, strict=False):
@@ -590,12 +591,12 @@ def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) ->
             label = record["name"] if i == 0 else None
             right.step(steps, fitness, where="post", color=colour, lw=1, label=label)
     left.set_yticks(range(len(names)), names, fontsize=8)
+    left.set_ylim(len(names) - 0.5, -0.5)
     left.set_xlim(-0.02, 1.02)
-    left.invert_yaxis()
     left.set_xlabel("best greedy fitness per search")
     right.set_xlabel("environment steps")
     right.set_ylabel("best greedy fitness so far")
-    right.legend(fontsize=6, loc="upper left", ncols=2)
+    right.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
     fig.suptitle("Calibration: which physics lets DDPG leave zero")
     fig.tight_layout()
     return fig
