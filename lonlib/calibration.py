@@ -55,7 +55,13 @@ from lonlib.pendulum import (
     wrap_angle,
 )
 from lonlib.store import atomic_write, read_json, write_json
-from lonlib.validation import check_choice, check_field_types, check_range, read_yaml_mapping
+from lonlib.validation import (
+    check_choice,
+    check_field_types,
+    check_name,
+    check_range,
+    read_yaml_mapping,
+)
 
 MOTORS = ("force", "acceleration", "velocity")
 INTEGRATORS = ("euler", "semi-implicit")
@@ -182,11 +188,7 @@ class CalibrationConfig:
 
     def __post_init__(self) -> None:
         check_field_types(self)
-        if (
-            not isinstance(self.name, str)
-            or not self.name.replace("-", "").replace("_", "").isalnum()
-        ):
-            raise ValueError(f"name must be letters, digits, '-' or '_', got {self.name!r}")
+        check_name(self.name)
         if not self.cells or not all(isinstance(c, Cell) for c in self.cells):
             raise ValueError("cells must list at least one Cell")
         names = [cell.name for cell in self.cells]

@@ -51,6 +51,12 @@ def check_choice(name: str, value: Any, allowed: tuple) -> None:
         raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
 
 
+def check_name(name: Any) -> None:
+    """A configuration's name: letters, digits, '-' or '_' (it names folders and files)."""
+    if not isinstance(name, str) or not name.replace("-", "").replace("_", "").isalnum():
+        raise ValueError(f"name must be letters, digits, '-' or '_', got {name!r}")
+
+
 def read_yaml_mapping(path: Path, what: str) -> dict[str, Any]:
     """The mapping in a YAML configuration file, ``name`` defaulting to the file's stem;
     ValueError naming the file if it is not valid YAML or not a mapping of ``what`` keys."""
