@@ -1,4 +1,5 @@
-"""The ``lonlib`` command: run experiments, see their status, build and export their LONs."""
+"""The ``lonlib`` command: run experiments, see their status, build and export their LONs,
+calibrate the physics."""
 
 from __future__ import annotations
 
@@ -61,6 +62,17 @@ def _lon(args: argparse.Namespace) -> None:
     print(f"metrics, GraphML and trace files written to {out}")
 
 
+def _calibrate(args: argparse.Namespace) -> None:
+    from lonlib.calibration import load_calibration, run_calibration, with_overrides
+
+    config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
+    result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
+    with pd.option_context("display.width", 200, "display.max_columns", 30):
+        print(result.cells.drop(columns=["seconds"]).to_string(index=False))
+        print(result.drift.to_string(index=False))
+    print(f"tables and figure written to {args.out}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lonlib`` (also used for ``--help``)."""
     parser = argparse.ArgumentParser(prog="lonlib", description=__doc__)
@@ -86,6 +98,20 @@ def build_parser() -> argparse.ArgumentParser:
     lon.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality tolerance")
     lon.add_argument("--out", help="export folder (default DIR/lon)")
     lon.set_defaults(func=_lon)
+
+    calibrate = sub.add_parser(
+        "calibrate", help="run (or resume) the physics calibration study into OUT"
+    )
+    calibrate.add_argument("out", metavar="OUT", help="output folder")
+    calibrate.add_argument(
+        "--grid", default="default", help="'default', 'tiny' or a YAML file (default: default)"
+    )
+    calibrate.add_argument("--workers", type=int, default=1, help="cells run in parallel")
+    calibrate.add_argument("--seeds", type=int, help="searches per cell (override)")
+    calibrate.add_argument("--max-steps", type=int, help="env steps per search (override)")
+    calibrate.add_argument("--batch", type=int, help="DDPG minibatch size (override)")
+    calibrate.add_argument("--quiet", action="store_true", help="no progress bar")
+    calibrate.set_defaults(func=_calibrate)
     return parser
 
 

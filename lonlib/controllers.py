@@ -75,7 +75,8 @@ class SwingUpBalanceController:
     Works in cart-acceleration space: pumping asks ``x_ddot = k (E - E_up) theta_dot cos``;
     near upright an LQR on the linearised rod ``(theta, theta_dot, x_dot)`` takes over.
     The desired acceleration becomes a motor action through the exact inverse dynamics of
-    the configured motor (force or acceleration) and is clipped to what the motor can do.
+    the configured motor (force, acceleration, or the speed command ``x_dot + tau x_ddot``
+    of the velocity servo) and is clipped to what the motor can do.
     It sees only the sensors, so cart position is known only near neighbours and track ends.
     """
 
@@ -132,11 +133,14 @@ class SwingUpBalanceController:
             m, l, g = cfg.pole_mass, cfg.pole_half_length, cfg.gravity
             sin, cos = np.sin(d.theta), np.cos(d.theta)
             theta_ddot = 0.75 / l * (g * sin - accel * cos)
-            push = (cfg.cart_mass + m) * accel + m * l * (theta_ddot * cos - d.theta_dot**2 * sin)
+            drive = (cfg.cart_mass + m) * accel + m * l * (theta_ddot * cos - d.theta_dot**2 * sin)
+        elif cfg.motor == "velocity":
+            # x_ddot = (v_cmd - x_dot) / tau  =>  the speed to command for this acceleration
+            drive = d.x_dot + cfg.motor_tau * accel
         else:
-            push = accel
-        # push = -gain * u and u = 2 - 4a  =>  a = (push / gain + 2) / 4
-        return np.clip((push / cfg.motor_gain + 2.0) / 4.0, 0.0, 1.0)
+            drive = accel
+        # drive = -gain * u and u = 2 - 4a  =>  a = (drive / gain + 2) / 4
+        return np.clip((drive / cfg.motor_gain + 2.0) / 4.0, 0.0, 1.0)
 
 
 __all__ = [

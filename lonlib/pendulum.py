@@ -31,6 +31,20 @@ follows (same rod, same hinge friction)::
     x_ddot   = a_motor
     phi_ddot = 3 / (4 l) * (g sin(phi) - x_ddot cos(phi)) - 3 mu_p phi_dot / (4 m l^2)
 
+With ``motor="velocity"`` the command is the cart's **target speed** ``v_cmd`` [m/s], which a
+speed servo approaches with a first-order lag of time constant ``tau = motor_tau``; the rod
+follows the resulting cart acceleration through the acceleration-mode rod equation (cart
+mass and cart friction do not enter: the servo overrides them)::
+
+    x_ddot   = (v_cmd - x_dot) / tau
+    phi_ddot = 3 / (4 l) * (g sin(phi) - x_ddot cos(phi)) - 3 mu_p phi_dot / (4 m l^2)
+
+The lag is integrated by the same Euler step ``h = dt / substeps`` as everything else, so
+after ``k`` steps of a constant command ``x_dot = v_cmd + (x_dot_0 - v_cmd) (1 - h / tau)^k``
+(the continuous response is ``exp(-t / tau)``; the two agree as ``h / tau -> 0``).
+``tau >= h`` is required (the discrete lag then never overshoots); ``tau = h`` is an ideal
+servo that reaches the commanded speed in one step.
+
 Carts interact only through the termination rules (the tether is a chain, not a spring).
 Integration: ``substeps`` Euler steps per control step of ``dt`` seconds. The default is
 **explicit Euler** (all derivatives from the old state), the spec's choice;
@@ -56,8 +70,10 @@ the two actuators ``(A0, A1) = (254 (0.5 - a), 0)`` if ``a < 0.5`` else ``(0, 25
 and the motor command ``u = 2 (A0/127 - A1/127)`` in [-2, 2] (paper), i.e. ``u = 2 - 4a``.
 ``u > 0`` drives the cart to the left (paper: "acceleration to left when A1 - A2 > 0"), so
 the horizontal force is ``F = -motor_gain * u`` newtons (ours: gain 1 N per unit), or the
-acceleration ``-motor_gain * u`` m/s^2 in acceleration mode. ``a = 1`` is full push right,
-``a = 0`` full push left, ``a = 0.5`` no push.
+acceleration ``-motor_gain * u`` m/s^2 in acceleration mode, or the target speed
+``v_cmd = -motor_gain * u`` m/s in velocity mode (gain 1: the command range is the +-2 m/s
+of the velocity sensors S6/S7, the paper's inputs that "dictate the speed"). ``a = 1`` is
+full push right, ``a = 0`` full push left, ``a = 0.5`` no push (velocity mode: stand still).
 
 Sensors (paper Table I), per cart, in [0, 127]; networks see them divided by 127
 ----------------------------------------------------------------------------------
@@ -90,6 +106,14 @@ executed step (the terminating one included) the step's upright value is added: 
 rods are upright (``fitness_mode="all"``, the paper's text) or the fraction of upright rods
 (``"mean"``, Algorithm 1's double sum). Fitness = sum / ``steps``: an early end is
 penalised, never rescaled.
+
+DDPG reward per step (ours; the LON's fitness is always Algorithm 1's)
+---------------------------------------------------------------------
+``height``: mean over rods of ``(1 + cos(phi)) / 2`` (1 upright, 0 hanging) plus
+``termination_penalty`` on a step that ends the episode by collision, tether or boundary.
+``slow-height``: the same with each rod's height scaled by
+``1 - min(|phi_dot| / angular_velocity_range, 1)``, so a slow upright rod earns more than a
+spinning one. ``upright``: the step's fitness increment divided by ``steps`` (sparse).
 """
 
 from __future__ import annotations
@@ -106,6 +130,7 @@ from lonlib.validation import check_choice, check_field_types, check_keys, check
 SENSORS_PER_CART = 10
 SENSOR_MAX = 127.0
 MAX_CARTS = 5
+MAX_MOTOR_TAU = 10.0  # [s]; a slower servo is not a motor any more
 STEP_CAP = 3000  # paper: "the simulation spans a maximum of 3000 time steps"
 
 FloatArray = np.ndarray
@@ -125,9 +150,9 @@ class EndReason(IntEnum):
 
 _CHOICES = {
     "integrator": ("euler", "semi-implicit"),
-    "motor": ("force", "acceleration"),
+    "motor": ("force", "acceleration", "velocity"),
     "fitness_mode": ("all", "mean"),
-    "reward": ("height", "upright"),
+    "reward": ("height", "slow-height", "upright"),
 }
 
 
@@ -153,6 +178,7 @@ class PendulumConfig:
     integrator: str = "euler"
     motor: str = "force"
     motor_gain: float = 1.0
+    motor_tau: float = 0.02
     cart_width: float = 0.2
     tether_length: float = 2.0
     initial_spacing: float = 1.1
@@ -192,6 +218,14 @@ class PendulumConfig:
             check_range(name, getattr(self, name), 0.0, low_open=True)
         for name in ("cart_friction", "hinge_friction", "track_half_length_per_cart"):
             check_range(name, getattr(self, name), 0.0)
+        check_range("motor_tau", self.motor_tau, 0.0, MAX_MOTOR_TAU, low_open=True)
+        step = self.dt / self.substeps
+        if self.motor == "velocity" and self.motor_tau < step:
+            # The Euler-integrated lag overshoots when tau < h (and diverges beyond 2 h).
+            raise ValueError(
+                f"motor_tau must be in [dt / substeps = {step:g}, {MAX_MOTOR_TAU:g}] for the "
+                f"velocity motor, got {self.motor_tau!r}"
+            )
         if not 0 < self.upright_angle <= math.pi:
             raise ValueError(f"upright_angle must be in (0, pi], got {self.upright_angle!r}")
         if self.termination_penalty > 0:
@@ -391,25 +425,27 @@ class CoupledPendulums:
 
     # ------------------------------------------------------------------ dynamics
     def _accelerations(
-        self, x_dot: FloatArray, phi: FloatArray, phi_dot: FloatArray, push: FloatArray
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        self, x_dot: FloatArray, phi: FloatArray, phi_dot: FloatArray, drive: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """``x_ddot, phi_ddot`` for the motor output ``drive`` (force [N], acceleration
+        [m/s^2] or target speed [m/s], by motor model)."""
         cfg = self.config
         m, l, g = cfg.pole_mass, cfg.pole_half_length, cfg.gravity
         sin, cos = np.sin(phi), np.cos(phi)
         if cfg.motor == "force":
             total = cfg.cart_mass + m
             friction = cfg.cart_friction * np.sign(x_dot)
-            temp = (-push - m * l * phi_dot**2 * sin + friction) / total
+            temp = (-drive - m * l * phi_dot**2 * sin + friction) / total
             phi_ddot = (g * sin + cos * temp - cfg.hinge_friction * phi_dot / (m * l)) / (
                 l * (4.0 / 3.0 - m * cos**2 / total)
             )
-            x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total
+            x_ddot = (drive + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total
         else:
-            x_ddot = push
+            x_ddot = drive if cfg.motor == "acceleration" else (drive - x_dot) / cfg.motor_tau
             phi_ddot = 0.75 / l * (g * sin - x_ddot * cos) - 0.75 * cfg.hinge_friction * (
                 phi_dot / (m * l * l)
             )
-        return x_ddot, phi_ddot, sin, cos
+        return x_ddot, phi_ddot
 
     def step(self, actions: FloatArray) -> StepResult:
         """Advance every running environment by one control step of ``dt`` seconds.
@@ -422,11 +458,11 @@ class CoupledPendulums:
         if actions.shape != self.x.shape:
             raise ValueError(f"actions must have shape {self.x.shape}, got {actions.shape}")
         running = ~self.done
-        push = -cfg.motor_gain * motor_command(actions)
+        drive = -cfg.motor_gain * motor_command(actions)
         h = cfg.dt / cfg.substeps
         x, x_dot, phi, phi_dot = self.x, self.x_dot, self.phi, self.phi_dot
         for _ in range(cfg.substeps):
-            x_ddot, phi_ddot, _, _ = self._accelerations(x_dot, phi, phi_dot, push)
+            x_ddot, phi_ddot = self._accelerations(x_dot, phi, phi_dot, drive)
             if cfg.integrator == "euler":
                 x, phi = x + h * x_dot, phi + h * phi_dot
                 x_dot, phi_dot = x_dot + h * x_ddot, phi_dot + h * phi_ddot
@@ -457,10 +493,14 @@ class CoupledPendulums:
         reason = np.where(truncated, EndReason.STEP_LIMIT, reason)
         self.end_reason = np.where(running, reason, self.end_reason).astype(np.int8)
 
-        if cfg.reward == "height":
-            reward = 0.5 * (1.0 + cos).mean(axis=1) + cfg.termination_penalty * terminated
-        else:
+        if cfg.reward == "upright":
             reward = upright / cfg.steps
+        else:
+            height = 0.5 * (1.0 + cos)
+            if cfg.reward == "slow-height":
+                speed = np.abs(self.phi_dot) / cfg.angular_velocity_range
+                height = height * (1.0 - np.minimum(speed, 1.0))
+            reward = height.mean(axis=1) + cfg.termination_penalty * terminated
         reward = reward * running
         return StepResult(
             reward=reward,

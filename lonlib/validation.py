@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 
 def check_field_types(config: Any) -> None:
@@ -72,6 +74,25 @@ def check_choice(name: str, value: Any, allowed: tuple) -> None:
     """``value`` must be one of ``allowed``."""
     if value not in allowed:
         raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def check_name(name: Any) -> None:
+    """A configuration's name: letters, digits, '-' or '_' (it names folders and files)."""
+    if not isinstance(name, str) or not name.replace("-", "").replace("_", "").isalnum():
+        raise ValueError(f"name must be letters, digits, '-' or '_', got {name!r}")
+
+
+def read_yaml_mapping(path: Path, what: str) -> dict[str, Any]:
+    """The mapping in a YAML configuration file, ``name`` defaulting to the file's stem;
+    ValueError naming the file if it is not valid YAML or not a mapping of ``what`` keys."""
+    try:
+        values = yaml.safe_load(Path(path).read_text()) or {}
+    except yaml.YAMLError as error:
+        raise ValueError(f"{path}: not valid YAML ({error})") from None
+    if not isinstance(values, dict):
+        raise ValueError(f"{path}: expected a mapping of {what} keys")
+    values.setdefault("name", Path(path).stem)
+    return values
 
 
 def _number(value: float) -> str:

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from lonlib.controllers import SwingUpBalanceController, decode_sensors, zero_controller
-from lonlib.pendulum import EndReason, PendulumConfig, evaluate, sensors
+from lonlib.pendulum import (
+    CoupledPendulums,
+    EndReason,
+    PendulumConfig,
+    evaluate,
+    sensors,
+    wrap_angle,
+)
 
 
 @pytest.mark.parametrize("n_carts", [1, 2])
@@ -28,6 +35,19 @@ def test_swing_up_controller_keeps_rods_upright_most_of_the_episode(n_carts):
 def test_swing_up_works_in_acceleration_motor_mode():
     cfg = PendulumConfig(n_carts=1, motor="acceleration")
     assert evaluate(SwingUpBalanceController(cfg), cfg).fitness[0] > 0.5
+
+
+def test_swing_up_balances_one_cart_under_the_velocity_motor_and_semi_implicit_euler():
+    cfg = PendulumConfig(n_carts=1, motor="velocity", motor_tau=0.02, integrator="semi-implicit")
+    sim, controller = CoupledPendulums(cfg), SwingUpBalanceController(cfg)
+    angle, speed = [], []
+    while not sim.done.all():
+        sim.step(controller(sim.observe()))
+        angle.append(wrap_angle(sim.phi)[0, 0])
+        speed.append(sim.phi_dot[0, 0])
+    assert sim.end_reason[0] == EndReason.STEP_LIMIT and sim.fitness[0] > 0.9
+    # balanced, not spinning: the second half of the episode is still and upright
+    assert np.abs(angle[1000:]).max() < 0.05 and np.abs(speed[1000:]).max() < 0.1
 
 
 def test_decode_sensors_inverts_table_one_inside_the_ranges():

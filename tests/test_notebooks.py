@@ -21,7 +21,9 @@ def execute(name, tmp_path, **parameters):
     return out
 
 
-@pytest.mark.parametrize("name", ["sample_lon", "analyse_lon", "record_optima"])
+@pytest.mark.parametrize(
+    "name", ["sample_lon", "analyse_lon", "record_optima", "calibrate_physics"]
+)
 def test_notebooks_are_committed_without_outputs_and_with_a_parameters_cell(name):
     import nbformat
 

@@ -278,6 +278,8 @@ def test_wrap_angle():
         ("dt", 0.0),
         ("dt", float("inf")),
         ("motor_gain", 0.0),
+        ("motor_tau", 0.0),
+        ("motor_tau", 10.5),
         ("cart_width", 0.0),
         ("tether_length", 0.1),
         ("initial_spacing", 3.0),
@@ -447,3 +449,124 @@ def test_the_termination_penalty_falls_on_a_true_end_only():
             last[i] = (out.reward[i], height[i], bool(out.terminated[i]))
     assert last[0][2] and last[0][0] == pytest.approx(last[0][1] - 5.0)
     assert not last[1][2] and last[1][0] == pytest.approx(last[1][1])
+
+
+# ---------------------------------------------------------------- velocity motor
+def velocity_sim(tau=0.1, substeps=1, integrator="semi-implicit", **changes):
+    cfg = PendulumConfig(
+        n_carts=1,
+        motor="velocity",
+        motor_tau=tau,
+        substeps=substeps,
+        integrator=integrator,
+        track_half_length_base=100.0,
+        **{**FRICTIONLESS, **changes},
+    )
+    return CoupledPendulums(cfg)
+
+
+def speed_response(sim, action, steps):
+    speeds = []
+    for _ in range(steps):
+        sim.step(np.full((1, 1), action))
+        speeds.append(sim.x_dot[0, 0])
+    return np.array(speeds)
+
+
+def test_velocity_motor_reaches_the_commanded_speed_with_the_first_order_lag():
+    tau, target = 0.1, 2.0  # a = 1: full command to the right, 2 m/s
+    k = np.arange(1, 51)
+    # one Euler step per control step: exactly the discrete first-order lag
+    speeds = speed_response(velocity_sim(tau), 1.0, 50)
+    np.testing.assert_allclose(speeds, target * (1 - (1 - 0.02 / tau) ** k), rtol=1e-12)
+    # with fine substeps: the analytic response 1 - exp(-t / tau) (63 % of the target at tau)
+    speeds = speed_response(velocity_sim(tau, substeps=100), 1.0, 50)
+    analytic = target * (1 - np.exp(-k * 0.02 / tau))
+    assert np.abs(speeds - analytic).max() < 0.005
+    assert speeds[4] == pytest.approx(target * (1 - math.exp(-1)), abs=0.005)
+    # tau = dt is an ideal speed servo: the command is reached in one step, either integrator
+    for integrator in ("euler", "semi-implicit"):
+        np.testing.assert_allclose(
+            speed_response(velocity_sim(0.02, integrator=integrator), 0.25, 3), -1.0
+        )
+
+
+def test_velocity_motor_cart_commanded_to_zero_stays_put_whatever_its_rod_does():
+    sim = velocity_sim(tau=0.1)
+    sim.phi[:], sim.phi_dot[:] = 2.0, 3.0
+    for _ in range(300):
+        sim.step(np.full((1, 1), 0.5))
+    assert sim.x[0, 0] == 0.0 and sim.x_dot[0, 0] == 0.0
+    assert abs(sim.phi_dot[0, 0]) > 0.5  # the rod kept swinging
+    # a moving cart commanded to 0 stops and then stays
+    sim = velocity_sim(tau=0.1)
+    sim.x_dot[:] = 1.5
+    speeds = speed_response(sim, 0.5, 200)
+    assert (np.diff(speeds) <= 0).all() and abs(speeds[-1]) < 1e-15
+    # it glides v (tau - h) (the discrete lag's sum; v tau in continuous time), then stays
+    glide = sim.x[0, 0]
+    assert glide == pytest.approx(1.5 * (0.1 - 0.02))
+    speed_response(sim, 0.5, 100)
+    assert sim.x[0, 0] == pytest.approx(glide, abs=1e-15)
+
+
+@pytest.mark.parametrize(("start", "integrator"), [(math.pi, "euler"), (0.0, "semi-implicit")])
+def test_rod_swings_backwards_when_the_cart_speeds_up(start, integrator):
+    # A cart stepping to the right throws its rod's tip to the left (sin(phi) < 0), hanging
+    # or upright, and the opposite command mirrors it.
+    for action, side in ((1.0, -1.0), (0.0, 1.0)):
+        sim = velocity_sim(tau=0.05, integrator=integrator)
+        sim.phi[:] = start
+        for _ in range(5):
+            sim.step(np.full((1, 1), action))
+        assert np.sign(sim.x_dot[0, 0]) == -side
+        assert np.sign(np.sin(sim.phi[0, 0])) == side
+
+
+def rod_energy_drift(integrator):
+    """Energy drift of a swinging rod on a cart driven at a constant 1 m/s: first and last
+    500 of 2000 steps."""
+    sim = velocity_sim(tau=0.02, integrator=integrator)
+    cfg = sim.config
+    m, l, g = cfg.pole_mass, cfg.pole_half_length, cfg.gravity
+    sim.x_dot[:], sim.phi[:] = 1.0, 2.0
+    drift = []
+    for _ in range(2000):
+        energy = (2 / 3) * m * l**2 * sim.phi_dot**2 + m * g * l * np.cos(sim.phi)
+        drift.append(energy[0, 0])
+        sim.step(np.full((1, 1), 0.75))  # u = -1: 1 m/s to the right, the speed it has
+    assert sim.x_dot[0, 0] == 1.0 and sim.end_reason[0] != EndReason.BOUNDARY
+    drift = np.abs(np.array(drift) - drift[0])
+    return drift[:500].max(), drift[-500:].max()
+
+
+def test_rod_energy_on_a_cart_at_constant_speed_stays_within_the_semi_implicit_bound():
+    # At constant speed the cart's frame is inertial: the rod's energy about its hinge is
+    # conserved. Symplectic Euler keeps the error O(h) (bounded, no trend); explicit Euler
+    # lets it grow.
+    early, late = rod_energy_drift("semi-implicit")
+    assert early < 1.0 * 0.02 and late < 1.1 * early
+    early, late = rod_energy_drift("euler")
+    assert late > 2 * early
+
+
+def test_velocity_motor_tau_must_not_be_shorter_than_the_integration_step():
+    PendulumConfig(motor="velocity", motor_tau=0.02)
+    PendulumConfig(motor="velocity", motor_tau=0.005, substeps=4)
+    PendulumConfig(motor="force", motor_tau=0.001)  # unused by the other motors
+    for changes in ({"motor_tau": 0.01}, {"motor_tau": 0.004, "substeps": 4}):
+        with pytest.raises(ValueError, match="motor_tau"):
+            PendulumConfig(motor="velocity", **changes)
+
+
+def test_slow_height_reward_prefers_a_slow_upright_rod_to_a_spinning_one():
+    def reward(phi_dot, kind):
+        cfg = PendulumConfig(n_carts=1, reward=kind, gravity=1e-9, **FRICTIONLESS)
+        sim = CoupledPendulums(cfg)
+        sim.phi[:], sim.phi_dot[:] = 0.0, phi_dot
+        return sim.step(np.full((1, 1), 0.5)).reward[0]
+
+    assert reward(0.0, "slow-height") == pytest.approx(reward(0.0, "height"))
+    assert reward(0.0, "slow-height") > reward(8.0, "slow-height") > 0.0
+    assert reward(-8.0, "slow-height") == pytest.approx(reward(8.0, "slow-height"), rel=1e-3)
+    assert reward(20.0, "slow-height") == 0.0 and reward(20.0, "height") > 0.5
