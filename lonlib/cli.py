@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.store import CorruptDataError, p_label
+from lonlib.store import CorruptDataError, MissingExperimentError, p_label
 
 
 def _run(args: argparse.Namespace) -> None:
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
     args = build_parser().parse_args(argv)
     try:
         args.func(args)
-    except (ValueError, CorruptDataError) as error:
+    except (ValueError, CorruptDataError, MissingExperimentError) as error:
         print(f"lonlib: error: {error}", file=sys.stderr)
         raise SystemExit(2) from None
 

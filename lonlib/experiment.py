@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import yaml
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from lonlib.basin_hopping import (
     BasinHoppingConfig,
@@ -35,10 +35,12 @@ from lonlib.basin_hopping import (
 from lonlib.ddpg import DDPGConfig
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
+from lonlib.progress import progress_bar
 from lonlib.store import (
     load_run_state,
     read_experiment_trials,
     read_json,
+    read_manifest,
     save_step,
     write_json,
 )
@@ -319,7 +321,7 @@ def run_experiment(
     todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
     write_json(out / "manifest.json", manifest)
     total = len(config.perturbations) * config.runs
-    bar = tqdm(
+    bar = progress_bar(
         total=total,
         initial=total - len(todo),
         desc=f"{config.name} runs",
@@ -416,7 +418,7 @@ def status(out: str | Path) -> pd.DataFrame:
     """Per p: runs finished, started (interrupted or running), not started; local searches,
     best fitness. Reads the manifest for the planned runs."""
     out = Path(out)
-    manifest = read_json(out / "manifest.json")
+    manifest = read_manifest(out)
     config = ExperimentConfig.from_mapping(manifest["config"])
     rows = []
     for p in config.perturbations:

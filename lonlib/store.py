@@ -35,6 +35,10 @@ class CorruptDataError(RuntimeError):
     """A stored file exists but cannot be read; the message names the file."""
 
 
+class MissingExperimentError(FileNotFoundError):
+    """No experiment has been sampled into a folder yet; the message says what to run."""
+
+
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it into place."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -62,6 +66,19 @@ def read_json(path: Path) -> dict:
         return json.loads(path.read_text())
     except (OSError, ValueError) as error:
         raise CorruptDataError(f"{path}: cannot read JSON ({error})") from error
+
+
+def read_manifest(root: Path) -> dict:
+    """The manifest of experiment folder ``root``: MissingExperimentError when nothing has
+    been sampled there yet, CorruptDataError when it cannot be read."""
+    path = Path(root) / "manifest.json"
+    if not path.exists():
+        raise MissingExperimentError(
+            f"no experiment in {root} yet (no manifest.json). Sample one first: `make reproduce` "
+            "(CONFIG=quick writes data/quick, CONFIG=paper data/paper), the sample_lon notebook, "
+            f"or `lonlib run quick --out {root}`"
+        )
+    return read_json(path)
 
 
 def p_label(p: float) -> str:
