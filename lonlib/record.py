@@ -244,7 +244,7 @@ def show_inline(path: str | Path, width: int | str = "auto", height: int = 560) 
     machine (``RERUN_NOTEBOOK_ASSET=serve-local``) unless the variable is set otherwise
     before the first call; rerun-notebook's own default fetches it from app.rerun.io. For a
     JupyterLab whose browser runs on another machine, set ``RERUN_NOTEBOOK_ASSET=inline``
-    (the viewer travels inside the notebook, ~30 MB). The file's bytes are sent as they
+    (the viewer travels inside the notebook, ~23 MB). The file's bytes are sent as they
     are, so the viewer applies the blueprint saved in it; it plays from the start in real
     time. Outside a notebook, use ``rerun FILE.rrd``.
     """
