@@ -9,17 +9,23 @@ CONFIG    ?= quick
 WORKERS   ?= 2
 SCHEDULER ?=
 OUT       ?= data/$(basename $(notdir $(CONFIG)))
-PAPERMILL := $(BIN)/papermill --log-level WARNING --no-progress-bar
+# papermill with an encrypted kernel connection and the kernel's stderr (progress) shown here
+PAPERMILL := $(BIN)/python -m lonlib.notebook_run --log-level WARNING --no-progress-bar
+# The browser test runs in `make test` when Chromium and chromedriver are installed.
+CHROMIUM  := $(shell for b in chromium chromium-browser google-chrome; do command -v $$b && break; done)
+BROWSER_TEST := $(if $(and $(CHROMIUM),$(shell command -v chromedriver 2>/dev/null)),yes)
 
-.PHONY: help setup test bench lab lint format clean reproduce mutants
+.PHONY: help setup test test-browser bench lab lint format clean reproduce mutants
 
 help:
 	@echo "make setup   create $(VENV) and install lonlib with its dev extra (idempotent)"
-	@echo "make test    set up, then run the test suite"
+	@echo "make test    set up, then run the test suite (with the browser test when Chromium"
+	@echo "             and chromedriver are installed: apt-get install chromium chromium-driver)"
+	@echo "make test-browser  JupyterLab driven in headless Chromium (tests/test_browser.py)"
 	@echo "make bench   set up, then run the benchmarks (writes benchmarks/results/*.json)"
 	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
 	@echo "             sample the LON for every p, analyse it and record optima (resumes)"
-	@echo "make lab     set up, then start JupyterLab in the project's environment"
+	@echo "make lab     set up, then start JupyterLab on the project (opens at notebooks/)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check"
 	@echo "make clean   remove $(VENV) and caches (never data/)"
@@ -37,11 +43,14 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 setup: $(STAMP)
 
-test: setup
+test: setup $(if $(BROWSER_TEST),$(VENV)/.lab-installed)
 	$(BIN)/python -m pytest -q
 
 mutants: setup
 	$(BIN)/python tests/mutants.py --jobs $(or $(JOBS),2)
+
+test-browser: $(VENV)/.lab-installed
+	$(BIN)/python -m pytest -q tests/test_browser.py
 
 lint: setup
 	$(BIN)/ruff check .
@@ -62,8 +71,11 @@ $(VENV)/.lab-installed: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[dev,lab]"
 	touch $@
 
+# The whole project in the file browser (data/ beside notebooks/), opened at notebooks/.
 lab: $(VENV)/.lab-installed
-	$(BIN)/jupyter lab --no-browser $$( [ "$$(id -u)" = 0 ] && echo --allow-root ) notebooks
+	$(BIN)/jupyter lab --no-browser $$( [ "$$(id -u)" = 0 ] && echo --allow-root ) \
+	  --ServerApp.root_dir=. --LabApp.default_url=/lab/tree/notebooks \
+	  --MappingKernelManager.transport_encryption=auto
 
 # Sampling, analysis and recordings through the notebooks (executed copies are kept).
 reproduce: setup

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -18,15 +19,28 @@ from lonlib.experiment import ExperimentConfig
 from lonlib.lon import build_lon, sinks
 from lonlib.lon_metrics import lon_metrics
 from lonlib.peaks import compare_with_paper, detect_peaks
-from lonlib.plots import fitness_histogram, lon_3d, lon_3d_html, optima_boxplot, sensitivity
+from lonlib.plots import (
+    fitness_histogram,
+    lon_3d,
+    lon_3d_interactive,
+    optima_boxplot,
+    save_html,
+    sensitivity,
+)
 from lonlib.record import record, recording_name
-from lonlib.store import optimum_path, p_label, read_experiment_trials, read_json, read_optimum
+from lonlib.store import (
+    optimum_path,
+    p_label,
+    read_experiment_trials,
+    read_manifest,
+    read_optimum,
+)
 
 
 def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
     """The stored configuration and all trials of an experiment folder."""
     folder = Path(folder)
-    config = ExperimentConfig.from_mapping(read_json(folder / "manifest.json")["config"])
+    config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
     trials = read_experiment_trials(folder)
     if trials.empty:
         raise ValueError(f"{folder} holds no finished local search yet")
@@ -35,12 +49,14 @@ def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]
 
 @dataclass
 class Analysis:
-    """What :func:`analyse` produced: tables, and the files it wrote."""
+    """What :func:`analyse` produced: tables, the files it wrote, the matplotlib figures
+    (saved as PNG) and the interactive 3-D LONs (plotly, saved as HTML), by file stem."""
 
     metrics: pd.DataFrame
     peaks: pd.DataFrame
     files: list[Path] = field(default_factory=list)
     figures: dict[str, plt.Figure] = field(default_factory=dict)
+    interactive: dict[str, Any] = field(default_factory=dict)
 
 
 def analyse(
@@ -51,7 +67,11 @@ def analyse(
     close_figures: bool = False,
 ) -> Analysis:
     """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, and
-    a sensitivity view when more than two p values are present."""
+    a sensitivity view when more than two p values are present.
+
+    ``close_figures`` closes each matplotlib figure once saved (it stays in the result and
+    can still be displayed), so a notebook's inline backend does not show every figure at
+    the end of the cell that called this."""
     folder = Path(folder)
     _, trials = load_experiment(folder)
     out = folder / "figures"
@@ -72,11 +92,10 @@ def analyse(
         graph = build_lon(group, "max", tolerance)
         label = p_label(p)
         metric_rows.append({"p": p, **lon_metrics(graph)})
-        save(f"fig3_lon_p={label}", lon_3d(graph, seed, title=f"3-D LON, p = {label}"))
-        html = lon_3d_html(
-            graph, out / f"fig3_lon_p={label}.html", seed, title=f"3-D LON, p = {label}"
-        )
-        result.files.append(html)
+        name, title = f"fig3_lon_p={label}", f"3-D LON, p = {label}"
+        save(name, lon_3d(graph, seed, title=title))
+        result.interactive[name] = lon_3d_interactive(graph, seed, title=title)
+        result.files.append(save_html(result.interactive[name], out / f"{name}.html"))
         sink_fitness = np.array([graph.nodes[n]["fitness"] for n in sinks(graph)])
         optima_fitness = np.array([f for _, f in graph.nodes(data="fitness")])
         save(

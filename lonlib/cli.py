@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.store import CorruptDataError, DataWriteError, p_label
+from lonlib.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
 
 
 def _run(args: argparse.Namespace) -> None:
@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> None:
     args = build_parser().parse_args(argv)
     try:
         args.func(args)
-    except (ValueError, CorruptDataError, DataWriteError) as error:
+    except (ValueError, CorruptDataError, DataWriteError, MissingExperimentError) as error:
         print(f"lonlib: error: {error}", file=sys.stderr)
         raise SystemExit(2) from None
 

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import yaml
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from lonlib.basin_hopping import (
     BasinHoppingConfig,
@@ -36,12 +36,13 @@ from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
+from lonlib.progress import progress_bar
 from lonlib.store import (
     DataWriteError,
     check_output_folder,
     load_run_state,
     read_experiment_trials,
-    read_json,
+    read_manifest,
     remove_temporary_files,
     run_dir,
     save_step,
@@ -313,7 +314,7 @@ def run_experiment(
         todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
         write_json(manifest_path(out), manifest)
     total = len(config.perturbations) * config.runs
-    bar = tqdm(
+    bar = progress_bar(
         total=total,
         initial=total - len(todo),
         desc=f"{config.name} runs",
@@ -382,7 +383,7 @@ def status(out: str | Path) -> pd.DataFrame:
     """Per p: runs finished, started (interrupted or running), not started; local searches,
     best fitness. Reads the manifest for the planned runs."""
     out = Path(out)
-    manifest = read_json(manifest_path(out))
+    manifest = read_manifest(out)
     config = ExperimentConfig.from_mapping(manifest["config"])
     rows = []
     for p in config.perturbations:

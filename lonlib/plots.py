@@ -1,8 +1,8 @@
 """The paper's figures (2-5), the 3-D LON (PNG and interactive HTML) and a sensitivity view.
 
-Every function returns a figure (matplotlib, or plotly for the HTML LON) and leaves saving
-to the caller, except :func:`lon_3d_html` which writes a self-contained file (plotly.js
-embedded, opens offline in a browser).
+Every function returns a figure (matplotlib, or plotly for the interactive LON) and leaves
+saving to the caller, except :func:`lon_3d_html` which writes a self-contained file
+(plotly.js embedded, opens offline in a browser).
 """
 
 from __future__ import annotations
@@ -97,8 +97,9 @@ def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figu
     return fig
 
 
-def lon_3d_html(graph: nx.DiGraph, path: str | Path, seed: int = 0, title: str = "3-D LON") -> Path:
-    """The 3-D LON as an interactive plotly page (rotate, zoom, hover for node details)."""
+def lon_3d_interactive(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON"):
+    """The 3-D LON as an interactive plotly figure (rotate, zoom, hover for node details);
+    a notebook shows it inline, :func:`lon_3d_html` writes it as a page."""
     import plotly.graph_objects as go
 
     pos = layout_2d(graph, seed)
@@ -165,9 +166,19 @@ def lon_3d_html(graph: nx.DiGraph, path: str | Path, seed: int = 0, title: str =
         title=title,
         scene={"zaxis_title": "fitness", "xaxis_visible": False, "yaxis_visible": False},
     )
+    return fig
+
+
+def save_html(fig, path: str | Path) -> Path:
+    """Write a plotly figure as a self-contained page (plotly.js embedded, works offline)."""
     path = Path(path)
     fig.write_html(path, include_plotlyjs=True, full_html=True)
     return path
+
+
+def lon_3d_html(graph: nx.DiGraph, path: str | Path, seed: int = 0, title: str = "3-D LON") -> Path:
+    """The 3-D LON as a self-contained interactive page (:func:`lon_3d_interactive`)."""
+    return save_html(lon_3d_interactive(graph, seed, title), path)
 
 
 def fitness_histogram(

@@ -3,18 +3,26 @@
 A recording holds, on the ``step`` timeline (and ``time`` in seconds):
 
 * ``world/track`` (static), ``world/carts`` (boxes), ``world/rods`` and ``world/tether``
-  (line strips): the scene, drawn in metres with y up;
+  (line strips): the scene, in metres, x along the track and y = minus the height above it
+  (rerun's 2-D views draw y pointing down, so this draws an upright rod up and a hanging
+  rod hanging), framed on the whole track;
 * ``sensors/cart_<j>``: the ten normalised Table I sensors of cart j;
 * ``actions``: the Actor's outputs; ``upright``: each rod's upright flag;
   ``fitness``: the running Algorithm 1 fitness;
 
-with a blueprint (scene on the left, time series on the right). Everything is simulated
-first and sent as whole columns (``send_columns``): per-step logging is ~100x slower.
-View with ``rerun FILE.rrd`` (command line) or inline in JupyterLab with ``rerun-notebook``.
+with a blueprint (scene on the left, time series on the right) saved in the file.
+Everything is simulated first and sent as whole columns (``send_columns``): per-step
+logging is ~100x slower. View with ``rerun FILE.rrd`` (command line) or inline in
+JupyterLab with :func:`show_inline` (``rerun-notebook``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
+import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,58 +79,116 @@ def recording_name(p: float, run: int, fitness: float, label: str = "") -> str:
     return f"{prefix}optimum_p={p_label(p)}_run={run}_f={fitness:.3f}.rrd"
 
 
+APP_ID = "lonlib"  # a valid rerun entry name: letters and '_' only (no '=', '.', spaces)
+CART_HEIGHT = 0.12  # metres, drawing only
+
+
+def recording_id(path: str | Path) -> str:
+    """A rerun recording id made from a file name: letters, digits, '-' and '_' only."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", Path(path).stem)
+
+
+def scene_height(height: np.ndarray) -> np.ndarray:
+    """A height above the track as a y coordinate of the scene: rerun's 2-D views draw y
+    pointing down (image convention), so heights are negated to draw upright things up."""
+    return -np.asarray(height, dtype=float)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """What the 2-D view draws, in scene coordinates (:func:`scene_height`), step by step."""
+
+    track: np.ndarray  # [3, 2, 2] the track and its two end posts (static)
+    cart_centres: np.ndarray  # [T, n, 2] carts sit on the track; rods hinge at their centres
+    rods: np.ndarray  # [T, n, 2, 2] hinge -> tip (phi = 0 up, pi hanging)
+    tether: np.ndarray  # [T, n - 1, 2, 2] centre to centre of neighbouring carts
+
+
+def scene(x: np.ndarray, phi: np.ndarray, config: PendulumConfig) -> Scene:
+    """The scene for cart centres ``x`` [T, n] and rod angles ``phi`` [T, n]."""
+    half = config.track_half_length
+    post = float(scene_height(0.3))
+    track = np.array(
+        [[[-half, 0.0], [half, 0.0]], [[-half, 0.0], [-half, post]], [[half, 0.0], [half, post]]]
+    )
+    centres = np.stack([x, np.full_like(x, scene_height(CART_HEIGHT / 2))], axis=-1)
+    tip = np.stack([np.sin(phi), scene_height(np.cos(phi))], axis=-1)
+    rods = np.stack([centres, centres + 2 * config.pole_half_length * tip], axis=-2)
+    tether = np.stack([centres[:, :-1], centres[:, 1:]], axis=-2)
+    return Scene(track, centres, rods, tether)
+
+
+def scene_bounds(config: PendulumConfig, margin: float = 0.15) -> tuple[tuple[float, float], ...]:
+    """The (x, y) ranges that frame the whole track and the rods in every position."""
+    half = config.track_half_length + margin
+    reach = 2 * config.pole_half_length + CART_HEIGHT / 2 + margin
+    return (-half, half), (-reach, reach)
+
+
+def recording_blueprint(config: PendulumConfig):
+    """The recording's layout: the scene framed on the whole track (left), time series of
+    sensors, actions, upright flags and fitness (right)."""
+    import rerun.blueprint as rrb
+
+    x_range, y_range = scene_bounds(config)
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial2DView(
+                origin="world",
+                name="carts and rods",
+                visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range),
+            ),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="sensors", name="sensors"),
+                rrb.TimeSeriesView(origin="actions", name="actions"),
+                rrb.TimeSeriesView(origin="upright", name="upright"),
+                rrb.TimeSeriesView(origin="fitness", name="fitness"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
 def record(
     theta: np.ndarray, config: PendulumConfig, path: str | Path, title: str = "lonlib optimum"
 ) -> Rollout:
-    """Simulate the greedy rollout of ``theta`` and save it as a rerun recording."""
+    """Simulate the greedy rollout of ``theta`` and save it as a rerun recording named
+    ``title`` in the viewer."""
     import rerun as rr
-    import rerun.blueprint as rrb
 
     episode = rollout(theta, config)
     steps, n = episode.x.shape
-    rec = rr.RecordingStream("lonlib", recording_id=f"{title}-{Path(path).stem}")
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id(path))
+    rec.send_recording_name(title)
     index = [
         rr.TimeColumn("step", sequence=np.arange(1, steps + 1)),
         rr.TimeColumn("time", duration=np.arange(1, steps + 1) * config.dt),
     ]
 
-    half = config.track_half_length
+    drawn = scene(episode.x, episode.phi, config)
     rec.log(
-        "world/track",
-        rr.LineStrips2D(
-            [[[-half, 0.0], [half, 0.0]], [[-half, 0.0], [-half, 0.3]], [[half, 0.0], [half, 0.3]]],
-            colors=[[90, 90, 90]],
-            radii=0.01,
-        ),
-        static=True,
+        "world/track", rr.LineStrips2D(drawn.track, colors=[[90, 90, 90]], radii=0.01), static=True
     )
-    cart_h = 0.12
-    centres = np.stack([episode.x, np.full_like(episode.x, cart_h / 2)], axis=2).reshape(-1, 2)
     rec.send_columns(
         "world/carts",
         index,
         rr.Boxes2D.columns(
-            centers=centres,
-            half_sizes=np.tile([config.cart_width / 2, cart_h / 2], (steps * n, 1)),
+            centers=drawn.cart_centres.reshape(-1, 2),
+            half_sizes=np.tile([config.cart_width / 2, CART_HEIGHT / 2], (steps * n, 1)),
         ).partition([n] * steps),
     )
     rec.log("world/carts", rr.Boxes2D.from_fields(colors=[[40, 90, 170]]), static=True)
-
-    rod = 2 * config.pole_half_length
-    base = np.stack([episode.x, np.full_like(episode.x, cart_h)], axis=2)
-    tip = base + rod * np.stack([np.sin(episode.phi), np.cos(episode.phi)], axis=2)
-    rods = np.stack([base, tip], axis=2).reshape(-1, 2, 2)
     rec.send_columns(
-        "world/rods", index, rr.LineStrips2D.columns(strips=rods).partition([n] * steps)
+        "world/rods",
+        index,
+        rr.LineStrips2D.columns(strips=drawn.rods.reshape(-1, 2, 2)).partition([n] * steps),
     )
     rec.log(
         "world/rods", rr.LineStrips2D.from_fields(colors=[[200, 60, 40]], radii=[0.02]), static=True
     )
     if n > 1:
-        y = np.full_like(episode.x[:, :-1], cart_h / 2)
-        left = np.stack([episode.x[:, :-1], y], axis=2)
-        right = np.stack([episode.x[:, 1:], y], axis=2)
-        tether = np.stack([left, right], axis=2).reshape(-1, 2, 2)
+        tether = drawn.tether.reshape(-1, 2, 2)
         rec.send_columns(
             "world/tether", index, rr.LineStrips2D.columns(strips=tether).partition([n - 1] * steps)
         )
@@ -150,22 +216,9 @@ def record(
             entity, index, rr.Scalars.columns(scalars=values.reshape(-1)).partition([width] * steps)
         )
 
-    blueprint = rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial2DView(origin="world", name="carts and rods"),
-            rrb.Vertical(
-                rrb.TimeSeriesView(origin="sensors", name="sensors"),
-                rrb.TimeSeriesView(origin="actions", name="actions"),
-                rrb.TimeSeriesView(origin="upright", name="upright"),
-                rrb.TimeSeriesView(origin="fitness", name="fitness"),
-            ),
-            column_shares=[3, 2],
-        ),
-        collapse_panels=True,
-    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    rec.save(str(path), default_blueprint=blueprint)
+    rec.save(str(path), default_blueprint=recording_blueprint(config))
     rec.flush(timeout_sec=30)
     rec.disconnect()
     return episode
@@ -183,20 +236,37 @@ def recorded_entities(path: str | Path) -> dict[str, int]:
     return counts
 
 
-def show_inline(path: str | Path, width: int = 950, height: int = 520) -> None:
-    """Show a recording inside JupyterLab (needs ``rerun-notebook``: ``make lab`` installs it).
+def show_inline(path: str | Path, width: int | str = "auto", height: int = 560) -> None:
+    """Show a recording inside JupyterLab, with its own layout, offline.
 
-    Outside a notebook, use the viewer instead: ``rerun FILE.rrd``.
+    ``width``: pixels, or ``"auto"`` (the cell's width). Needs ``rerun-notebook`` (``make
+    lab`` installs it). Its viewer (JavaScript and WebAssembly) is served from this kernel's
+    machine (``RERUN_NOTEBOOK_ASSET=serve-local``) unless the variable is set otherwise
+    before the first call; rerun-notebook's own default fetches it from app.rerun.io. For a
+    JupyterLab whose browser runs on another machine, set ``RERUN_NOTEBOOK_ASSET=inline``
+    (the viewer travels inside the notebook, ~23 MB). The file's bytes are sent as they
+    are, so the viewer applies the blueprint saved in it; it plays from the start in real
+    time. Outside a notebook, use ``rerun FILE.rrd``.
     """
+    os.environ.setdefault("RERUN_NOTEBOOK_ASSET", "serve-local")
     try:
-        import rerun_notebook  # noqa: F401
+        with contextlib.redirect_stdout(io.StringIO()):  # the asset server's start-up chatter
+            import rerun_notebook
     except ImportError as error:
         raise ImportError(
             f"inline viewing needs rerun-notebook (pip install 'rerun-notebook==0.41.*'); "
             f"or run: rerun {path}"
         ) from error
-    import rerun as rr
+    from IPython.display import display
 
-    rec = rr.RecordingStream("lonlib", recording_id=f"inline-{Path(path).stem}")
-    rec.log_file_from_path(Path(path))
-    rec.notebook_show(width=width, height=height)
+    if rerun_notebook.ASSET_ENV.startswith("https://app.rerun.io"):
+        warnings.warn(
+            "rerun_notebook was imported before lonlib.record.show_inline and fetches its viewer "
+            "from app.rerun.io (needs the internet); restart the kernel, or set "
+            "RERUN_NOTEBOOK_ASSET=serve-local before importing it",
+            stacklevel=2,
+        )
+    viewer = rerun_notebook.Viewer(width=width, height=height)
+    display(viewer)
+    viewer.send_rrd(Path(path).read_bytes())
+    viewer.set_time_ctrl("time", duration_nanos=0, play=True)  # play from the start, in real time

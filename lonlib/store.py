@@ -42,6 +42,10 @@ class CorruptDataError(RuntimeError):
     """A stored file exists but cannot be read; the message names the file."""
 
 
+class MissingExperimentError(FileNotFoundError):
+    """No experiment has been sampled into a folder yet; the message says what to run."""
+
+
 class DataWriteError(OSError):
     """A file could not be written (disk full, read-only folder, missing folder...). The
     message names the file and the cause; ``errno`` is the cause's. What was stored before
@@ -170,6 +174,19 @@ def check_output_folder(out: Path) -> None:
 def parquet_bytes(table: pd.DataFrame) -> bytes:
     """A table as Parquet file content."""
     return table.to_parquet(None, index=False)
+
+
+def read_manifest(root: Path) -> dict:
+    """The manifest of experiment folder ``root``: MissingExperimentError when nothing has
+    been sampled there yet, CorruptDataError when it cannot be read."""
+    path = Path(root) / "manifest.json"
+    if not path.exists():
+        raise MissingExperimentError(
+            f"no experiment in {root} yet (no manifest.json). Sample one first: `make reproduce` "
+            "(CONFIG=quick writes data/quick, CONFIG=paper data/paper), the sample_lon notebook, "
+            f"or `lonlib run quick --out {root}`"
+        )
+    return read_json(path)
 
 
 def p_label(p: float) -> str:

@@ -1,24 +1,47 @@
-"""Each notebook runs under papermill with tiny parameters and writes its outputs."""
+"""The notebooks run under papermill with tiny parameters, from the repository root (as
+``make reproduce``) and from ``notebooks/`` (where JupyterLab starts their kernels), and
+read and write one ``data/`` folder."""
 
+import json
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import papermill as pm
 import pytest
 
-NOTEBOOKS = Path(__file__).parent.parent / "notebooks"
+from tests.conftest import write_tiny_yaml
+
+REPO = Path(__file__).resolve().parent.parent
+NOTEBOOKS = REPO / "notebooks"
 
 
-def execute(name, tmp_path, **parameters):
-    out = tmp_path / f"{name}.out.ipynb"
+def clone_project(root: Path) -> Path:
+    """A project laid out as a fresh clone has it (pyproject.toml, notebooks/, an empty
+    data/) plus ``quick.yaml``: the tiny test configuration named ``quick``, so that
+    sample_lon with ``config="quick.yaml"`` writes data/quick, the other notebooks' default."""
+    root.mkdir(parents=True)
+    shutil.copy(REPO / "pyproject.toml", root)
+    shutil.copytree(NOTEBOOKS, root / "notebooks")
+    (root / "data").mkdir()
+    tiny = write_tiny_yaml(root)
+    (root / "quick.yaml").write_text(tiny.read_text().replace("name: tiny", "name: quick"))
+    tiny.unlink()
+    return root
+
+
+def execute(book: Path, out: Path, cwd: Path, **parameters) -> dict:
+    """Run ``book`` with papermill's Python API in ``cwd``; the executed notebook as JSON."""
     pm.execute_notebook(
-        str(NOTEBOOKS / f"{name}.ipynb"),
-        str(out),
-        parameters=parameters,
-        progress_bar=False,
-        cwd=str(tmp_path),
+        str(book), str(out), parameters=parameters, progress_bar=False, cwd=str(cwd)
     )
-    assert out.stat().st_size > 0
-    return out
+    return json.loads(out.read_text())
+
+
+def outputs(book: dict) -> list[dict]:
+    return [out for cell in book["cells"] for out in cell.get("outputs", [])]
 
 
 @pytest.mark.parametrize(
@@ -34,16 +57,35 @@ def test_notebooks_are_committed_without_outputs_and_with_a_parameters_cell(name
     assert any("parameters" in cell.metadata.get("tags", []) for cell in book.cells)
 
 
-def test_sample_analyse_and_record_notebooks(tmp_path):
-    from tests.conftest import write_tiny_yaml
+def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_path):
+    root = clone_project(tmp_path / "clone")
+    books, data = root / "notebooks", root / "data" / "quick"
+    # As JupyterLab runs it: the kernel in notebooks/.
+    execute(books / "sample_lon.ipynb", tmp_path / "s1.ipynb", books, config="quick.yaml", p=1e-3)
+    # As `make reproduce` runs it: lonlib.notebook_run from the repository root. The kernel's
+    # progress reaches the terminal; no warning about the kernel's connection or tqdm.
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]),
+    }
+    command = [sys.executable, "-m", "lonlib.notebook_run", "--log-level", "WARNING"]
+    command += ["--no-progress-bar", "notebooks/sample_lon.ipynb", str(tmp_path / "s2.ipynb")]
+    command += ["-r", "config", "quick.yaml", "-p", "p", "1e-4", "-p", "workers", "1"]
+    run = subprocess.run(command, cwd=root, env=env, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert "quick runs: 100%" in run.stderr and "local_searches=" in run.stderr, run.stderr
+    assert "best=" in run.stderr
+    assert "without encryption" not in run.stderr and "Warning" not in run.stderr, run.stderr
+    assert len(list(data.glob("p=*/run_*/trials.parquet"))) == 4
+    assert not (books / "data").exists()
 
-    yaml_path = write_tiny_yaml(tmp_path)
-    folder = tmp_path / "experiment"
-    for p in (1e-3, 1e-4):
-        execute("sample_lon", tmp_path, config=str(yaml_path), p=p, workers=1, out=str(folder))
-    assert len(list(folder.glob("p=*/run_*/trials.parquet"))) == 4
-    execute("analyse_lon", tmp_path, experiment_dir=str(folder))
-    figures = folder / "figures"
+    executed = execute(books / "analyse_lon.ipynb", tmp_path / "a.ipynb", books)  # defaults
+    pngs = [out for out in outputs(executed) if "image/png" in out.get("data", {})]
+    assert len(pngs) == 7  # each figure once: Fig. 2, and Figs. 3-5 for both p
+    plots = [
+        out for out in outputs(executed) if "application/vnd.plotly.v1+json" in out.get("data", {})
+    ]
+    assert len(plots) == 2  # the interactive 3-D LON of each p
     for name in (
         "fig2_optima_boxplot.png",
         "fig3_lon_p=0.0001.png",
@@ -53,7 +95,23 @@ def test_sample_analyse_and_record_notebooks(tmp_path):
         "metrics.csv",
         "peaks.csv",
     ):
-        assert (figures / name).stat().st_size > 0, name
-    execute("record_optima", tmp_path, experiment_dir=str(folder), show_inline_viewer=False)
-    recordings = list((folder / "recordings").glob("*.rrd"))
+        assert (data / "figures" / name).stat().st_size > 0, name
+
+    execute(books / "record_optima.ipynb", tmp_path / "r.ipynb", root, show_inline_viewer=False)
+    recordings = list((data / "recordings").glob("*.rrd"))
     assert recordings and all(path.stat().st_size > 0 for path in recordings)
+
+
+def test_a_missing_experiment_says_so_and_what_to_run(tmp_path, capsys):
+    from lonlib.analysis import load_experiment
+    from lonlib.cli import main
+    from lonlib.store import MissingExperimentError
+
+    folder = tmp_path / "data" / "quick"
+    with pytest.raises(MissingExperimentError, match="no experiment in .*`make reproduce`"):
+        load_experiment(folder)
+    with pytest.raises(SystemExit):
+        main(["status", str(folder)])
+    error = capsys.readouterr().err
+    assert "no experiment" in error and "corrupt" not in error.lower()
+    assert not folder.exists()  # nothing created while looking

@@ -8,7 +8,16 @@ import numpy as np
 
 from lonlib.nets import actor_spec
 from lonlib.pendulum import PendulumConfig
-from lonlib.record import record, recorded_entities, recording_name, rollout
+from lonlib.record import (
+    APP_ID,
+    record,
+    recorded_entities,
+    recording_id,
+    recording_name,
+    rollout,
+    scene,
+    scene_bounds,
+)
 
 
 def test_recording_reads_back_with_entities_and_frames(tmp_path):
@@ -37,6 +46,43 @@ def test_recording_reads_back_with_entities_and_frames(tmp_path):
         [str(rerun), "rrd", "verify", str(path)], capture_output=True, text=True
     )
     assert verify.returncode == 0, verify.stderr
+    stores = subprocess.run(
+        [str(rerun), "rrd", "print", str(path)], capture_output=True, text=True
+    ).stdout
+    # The layout travels in the file (a blueprint store), under a plain application id.
+    assert "Blueprint" in stores and f'"{APP_ID}"' in stores
+    assert f'"{recording_id(path)}"' in stores
+
+
+def test_recording_ids_are_plain_entry_names():
+    assert APP_ID.replace("_", "").isalnum()
+    assert recording_id("x/best_optimum_p=0.0001_run=3_f=0.720.rrd") == (
+        "best_optimum_p_0_0001_run_3_f_0_720"
+    )
+
+
+def test_scene_hangs_hanging_rods_in_rerun_y_down_coordinates():
+    """rerun's 2-D views draw y downwards: the scene negates heights, so a rod at the start
+    (hanging) has its tip below the hinge on screen, an upright rod above it, carts sit
+    above the track, and the view's bounds hold the track and every rod position."""
+    config = PendulumConfig(n_carts=2, steps=50)
+    start = rollout(actor_spec(2).initial(np.random.default_rng(1)), config)
+    end = config.track_half_length - config.cart_width / 2
+    x = np.vstack([start.x[:1], [[-end, end]], [[-end, end]]])
+    phi = np.vstack([start.phi[:1], [[0.0, 0.0]], [[np.pi, np.pi]]])
+    drawn = scene(x, phi, config)
+    hinge, tip = drawn.rods[:, :, 0], drawn.rods[:, :, 1]
+    rod = 2 * config.pole_half_length
+    assert np.all(tip[0, :, 1] - hinge[0, :, 1] > 0.99 * rod)  # hanging at the start
+    assert np.allclose(tip[1, :, 1] - hinge[1, :, 1], -rod)  # upright: up on screen
+    assert np.allclose(tip[2, :, 0], hinge[2, :, 0])
+    assert np.all(drawn.cart_centres[..., 1] < 0)  # above the track line y = 0
+    assert np.all(drawn.track[1:, 1, 1] < 0)  # the end posts point up
+    assert np.allclose(drawn.tether[:, 0], drawn.cart_centres[:, :2])
+    (x_low, x_high), (y_low, y_high) = scene_bounds(config)
+    points = np.concatenate([drawn.rods.reshape(-1, 2), drawn.track.reshape(-1, 2)])
+    assert np.all((points[:, 0] > x_low) & (points[:, 0] < x_high))
+    assert np.all((points[:, 1] > y_low) & (points[:, 1] < y_high))
 
 
 def test_rollout_matches_the_fitness_evaluation():
