@@ -7,6 +7,7 @@ the figures and tables derived here).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from lonlib.behaviour import descriptors_of
+from lonlib.behaviour_lon import behaviour_table, behavioural_lon
 from lonlib.experiment import ExperimentConfig
 from lonlib.lon import build_lon, sinks
 from lonlib.lon_metrics import lon_metrics
@@ -54,6 +57,8 @@ class Analysis:
 
     metrics: pd.DataFrame
     peaks: pd.DataFrame
+    behaviours: pd.DataFrame = field(default_factory=pd.DataFrame)  # typical behaviours per p
+    behavioural_metrics: pd.DataFrame = field(default_factory=pd.DataFrame)
     files: list[Path] = field(default_factory=list)
     figures: dict[str, plt.Figure] = field(default_factory=dict)
     interactive: dict[str, Any] = field(default_factory=dict)
@@ -87,31 +92,49 @@ def analyse(
             plt.close(fig)
 
     save("fig2_optima_boxplot", optima_boxplot(trials))
-    metric_rows, peak_rows = [], []
+    labelled = "label" in trials
+    metric_rows, peak_rows, behavioural_rows = [], [], []
     for p, group in trials.groupby("p", sort=True):
         graph = build_lon(group, "max", tolerance)
         label = p_label(p)
         metric_rows.append({"p": p, **lon_metrics(graph)})
         name, title = f"fig3_lon_p={label}", f"3-D LON, p = {label}"
         save(name, lon_3d(graph, seed, title=title))
-        result.interactive[name] = lon_3d_interactive(graph, seed, title=title)
+        result.interactive[name] = lon_3d_interactive(
+            graph, seed, title=title, hover=behaviour_hover(group) if labelled else None
+        )
         result.files.append(save_html(result.interactive[name], out / f"{name}.html"))
-        sink_fitness = np.array([graph.nodes[n]["fitness"] for n in sinks(graph)])
+        sink_names = sinks(graph)
+        sink_fitness = np.array([graph.nodes[n]["fitness"] for n in sink_names])
         optima_fitness = np.array([f for _, f in graph.nodes(data="fitness")])
+        sink_labels = [graph.nodes[n]["label"] for n in sink_names] if labelled else None
+        optima_labels = [d for _, d in graph.nodes(data="label")] if labelled else None
         save(
             f"fig4_sinks_p={label}",
-            fitness_histogram(sink_fitness, f"Fitness of sinks, p = {label}", bins),
+            fitness_histogram(
+                sink_fitness, f"Fitness of sinks, p = {label}", bins, labels=sink_labels
+            ),
         )
         save(
             f"fig5_optima_p={label}",
-            fitness_histogram(optima_fitness, f"Fitness of local optima, p = {label}", bins),
+            fitness_histogram(
+                optima_fitness, f"Fitness of local optima, p = {label}", bins, labels=optima_labels
+            ),
         )
+        if labelled:
+            behavioural_rows.append({"p": p, **lon_metrics(behavioural_lon(graph))})
         for what, values in (("sinks", sink_fitness), ("optima", optima_fitness)):
             table = compare_with_paper(detect_peaks(values, bins=bins))
             peak_rows.append(table.assign(p=p, histogram=what))
     result.metrics = pd.DataFrame(metric_rows)
     result.peaks = pd.concat(peak_rows, ignore_index=True)
-    for name, table in (("metrics", result.metrics), ("peaks", result.peaks)):
+    tables = [("metrics", result.metrics), ("peaks", result.peaks)]
+    if labelled:
+        result.behaviours = behaviour_table(trials, tolerance)
+        result.behavioural_metrics = pd.DataFrame(behavioural_rows)
+        tables += [("behaviours", result.behaviours)]
+        tables += [("metrics_behavioural", result.behavioural_metrics)]
+    for name, table in tables:
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
@@ -120,13 +143,50 @@ def analyse(
     return result
 
 
+def slug(text: str) -> str:
+    """File-name-safe form of a label: ``spinning (in phase)`` -> ``spinning-in-phase``."""
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")
+
+
+def behaviour_hover(trials: pd.DataFrame) -> dict[str, str]:
+    """Node -> hover text with the main descriptor values of its stored behaviour."""
+    from lonlib.lon import node_id
+
+    out = {}
+    for row, d in zip(trials.itertuples(), descriptors_of(trials), strict=True):
+        if d is None:
+            continue
+        rods = ", ".join(
+            f"rod {i}: up {s:.0%}, {t:+.1f} turns"
+            for i, (s, t) in enumerate(zip(d.upright_share, d.turns, strict=True))
+        )
+        out[node_id(row.p, row.run, row.index)] = (
+            f"{rods}<br>end {d.end_reason.lower()} at step {d.end_step}; "
+            f"cart range {d.cart_range:.2f} m<br>"
+            f"robustness: mean {d.robust_mean:.3f}, min {d.robust_min:.3f}"
+        )
+    return out
+
+
 def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e-9) -> pd.DataFrame:
-    """The best optimum of each p and, per detected sink-fitness peak, the sink nearest it
-    (one row per distinct optimum: p, run, index, fitness, role)."""
+    """The best optimum of each p, per detected sink-fitness peak the sink nearest it, and
+    the best optimum of each behaviour label (one row per distinct optimum: p, run, index,
+    fitness, role; the role names the label)."""
     rows: dict[str, dict] = {}
     for _, group in trials.groupby("p", sort=True):
         graph = build_lon(group, "max", tolerance)
         chosen = [(max(graph.nodes, key=lambda n: graph.nodes[n]["fitness"]), "best")]
+        by_label: dict[str, str] = {}
+        for node, data in graph.nodes(data=True):
+            behaviour = data.get("label")
+            if behaviour and (
+                behaviour not in by_label
+                or data["fitness"] > graph.nodes[by_label[behaviour]]["fitness"]
+            ):
+                by_label[behaviour] = node
+        chosen += [
+            (node, "best-" + b.replace(" ", "-").strip("()")) for b, node in by_label.items()
+        ]
         sink_nodes = sinks(graph)
         values = np.array([graph.nodes[n]["fitness"] for n in sink_nodes])
         for peak in detect_peaks(values, bins=bins)["fitness"]:
@@ -147,7 +207,7 @@ def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e
     return pd.DataFrame(list(rows.values()))
 
 
-def record_optima(folder: str | Path, bins: int = 50, limit: int = 12) -> list[Path]:
+def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[Path]:
     """Rerun recordings of the selected optima under ``<experiment>/recordings/``."""
     folder = Path(folder)
     config, trials = load_experiment(folder)

@@ -15,11 +15,48 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 
+from lonlib.behaviour import LABELS
 from lonlib.lon_io import to_igraph
 from lonlib.peaks import PAPER_PEAKS, detect_peaks
 from lonlib.store import p_label
 
 GREY, RED = "#8a8a8a", "#d62728"
+# One colour per behaviour label (lonlib.behaviour.LABELS order), colour-blind friendly.
+LABEL_COLOURS = dict(
+    zip(
+        LABELS,
+        (
+            "#d62728",
+            "#ff7f0e",
+            "#1f77b4",
+            "#17becf",
+            "#9467bd",
+            "#2ca02c",
+            "#bcbd22",
+            "#8c564b",
+            "#e377c2",
+            "#7f7f7f",
+        ),
+        strict=True,
+    )
+)
+
+
+def ordered_labels(labels) -> list[str]:
+    """The distinct labels present, in :data:`lonlib.behaviour.LABELS` order, unknown last."""
+    present = {str(x) for x in labels if x}
+    return [n for n in LABEL_COLOURS if n in present] + sorted(present - set(LABEL_COLOURS))
+
+
+def label_colour(label: str) -> str:
+    """The colour of a behaviour label in every figure (grey for an unknown one)."""
+    return LABEL_COLOURS.get(label, GREY)
+
+
+def _labels(graph: nx.DiGraph) -> dict[str, str] | None:
+    """Node -> behaviour label, or None when the graph's nodes carry no labels."""
+    labels = {n: d.get("label") for n, d in graph.nodes(data=True)}
+    return labels if any(labels.values()) else None
 
 
 def optima_boxplot(trials: pd.DataFrame) -> plt.Figure:
@@ -73,7 +110,8 @@ NODE_STYLE = {  # role -> (colour, matplotlib size, plotly size, legend label)
 
 def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figure:
     """Fig. 3: LON in 3-D, layout in the plane and z = fitness. Grey nodes, the best node
-    red, start nodes small; an edge darkens towards the optimum it leads to."""
+    red, start nodes small; an edge darkens towards the optimum it leads to. When the nodes
+    carry behaviour labels, the colour is the label's (the best node keeps its size)."""
     pos = layout_2d(graph, seed)
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
@@ -83,12 +121,27 @@ def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figu
         head = start + 0.65 * (end - start)
         ax.plot(*np.stack([start, head]).T, color="#c8c8c8", linewidth=0.8)
         ax.plot(*np.stack([head, end]).T, color="#505050", linewidth=1.6)
+    labels = _labels(graph)
     for role, names in _node_roles(graph).items():
         if not names:
             continue
-        color, size, _, label = NODE_STYLE[role]
+        color, size, _, legend = NODE_STYLE[role]
         xyz = np.array([(*pos[n], graph.nodes[n]["fitness"]) for n in names])
-        ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], c=color, s=size, depthshade=False, label=label)
+        if labels is None:
+            ax.scatter(*xyz.T, c=color, s=size, depthshade=False, label=legend)
+        else:
+            colours = [label_colour(labels[n]) for n in names]
+            ax.scatter(
+                *xyz.T,
+                c=colours,
+                s=size,
+                depthshade=False,
+                edgecolors="black",
+                linewidths=0.8 if "best" in role else 0.0,
+            )
+    if labels is not None:
+        for name in ordered_labels(labels.values()):
+            ax.scatter([], [], [], c=label_colour(name), s=30, label=name)
     ax.set_zlabel("fitness")
     ax.set_xticks([])
     ax.set_yticks([])
@@ -97,9 +150,13 @@ def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figu
     return fig
 
 
-def lon_3d_interactive(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON"):
+def lon_3d_interactive(
+    graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON", hover: dict[str, str] | None = None
+):
     """The 3-D LON as an interactive plotly figure (rotate, zoom, hover for node details);
-    a notebook shows it inline, :func:`lon_3d_html` writes it as a page."""
+    a notebook shows it inline, :func:`lon_3d_html` writes it as a page. With behaviour
+    labels on the nodes, markers take the label's colour (one legend entry per label);
+    ``hover`` adds text per node (e.g. its behaviour descriptor)."""
     import plotly.graph_objects as go
 
     pos = layout_2d(graph, seed)
@@ -145,22 +202,41 @@ def lon_3d_interactive(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON")
                 hoverinfo="skip",
             )
         )
+    labels = _labels(graph)
+    hover = hover or {}
+
+    def text(n: str) -> str:
+        parts = [n, f"fitness {graph.nodes[n]['fitness']:.3f}"]
+        if labels is not None:
+            parts.append(f"behaviour: {labels[n]}")
+        return "<br>".join(parts + ([hover[n]] if n in hover else []))
+
     for role, names in _node_roles(graph).items():
         if not names:
             continue
-        color, _, size, label = NODE_STYLE[role]
-        traces.append(
-            go.Scatter3d(
-                x=[pos[n][0] for n in names],
-                y=[pos[n][1] for n in names],
-                z=[graph.nodes[n]["fitness"] for n in names],
-                mode="markers",
-                name=label,
-                marker={"color": color, "size": size},
-                text=[f"{n}<br>fitness {graph.nodes[n]['fitness']:.3f}" for n in names],
-                hoverinfo="text",
+        color, _, size, legend = NODE_STYLE[role]
+        groups = [(legend, names, color)]
+        if labels is not None:
+            by_label: dict[str, list[str]] = {}
+            for n in names:
+                by_label.setdefault(labels[n] or "unlabelled", []).append(n)
+            groups = [
+                (f"{label} ({legend})", members, label_colour(label))
+                for label, members in by_label.items()
+            ]
+        for name, members, colour in groups:
+            traces.append(
+                go.Scatter3d(
+                    x=[pos[n][0] for n in members],
+                    y=[pos[n][1] for n in members],
+                    z=[graph.nodes[n]["fitness"] for n in members],
+                    mode="markers",
+                    name=name,
+                    marker={"color": colour, "size": size},
+                    text=[text(n) for n in members],
+                    hoverinfo="text",
+                )
             )
-        )
     fig = go.Figure(traces)
     fig.update_layout(
         title=title,
@@ -182,13 +258,31 @@ def lon_3d_html(graph: nx.DiGraph, path: str | Path, seed: int = 0, title: str =
 
 
 def fitness_histogram(
-    values: np.ndarray, title: str, bins: int = 50, paper_peaks: tuple[float, ...] = PAPER_PEAKS
+    values: np.ndarray,
+    title: str,
+    bins: int = 50,
+    paper_peaks: tuple[float, ...] = PAPER_PEAKS,
+    labels: np.ndarray | None = None,
 ) -> plt.Figure:
     """Figs. 4 and 5: histogram of fitness values with detected peaks (triangles) and the
-    paper's peaks (dashed lines)."""
+    paper's peaks (dashed lines); with ``labels`` (one behaviour label per value) the bars
+    are stacked by label in the labels' colours."""
     values = np.asarray(values, dtype=float)
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.hist(values, bins=bins, range=(0, 1), color=GREY, edgecolor="white")
+    if labels is None:
+        ax.hist(values, bins=bins, range=(0, 1), color=GREY, edgecolor="white")
+    else:
+        labels = np.asarray(labels, dtype=object)
+        present = ordered_labels(labels)
+        ax.hist(
+            [values[labels == name] for name in present],
+            bins=bins,
+            range=(0, 1),
+            stacked=True,
+            color=[label_colour(name) for name in present],
+            label=present,
+            edgecolor="white",
+        )
     peaks = detect_peaks(values, bins=bins)
     if len(peaks):
         ax.plot(peaks["fitness"], peaks["count"] + 0.3, "v", color=RED, label="detected peak")
