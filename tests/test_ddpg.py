@@ -33,6 +33,7 @@ def initial(n_carts, k, seed=0):
         ("min_steps", 10**9),
         ("device", "nonsense"),
         ("batch_size", 2.5),
+        ("update", "fast"),
     ],
 )
 def test_invalid_hyperparameters_are_refused_by_name(field, value):
