@@ -38,6 +38,8 @@ from lonlib.nets import NetSpec
 
 BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults, as the autograd reference uses
 EPS = 1e-8
+# Beyond this many steps both float32 bias-correction coefficients are exactly 1 and -lr.
+ADAM_TABLE_STEPS = 20_000
 LEARNERS = ("lean", "autograd")
 
 
@@ -179,13 +181,25 @@ class LeanDDPG:
         self.actor_moments = torch.zeros(2, *thetas.shape, device=self.device)
         self.critic_moments = torch.zeros(2, *omegas.shape, device=self.device)
         self.steps = np.zeros(k, dtype=np.int64)  # Adam steps per agent (host side)
-        # Per-agent Adam coefficients [sqrt(bias correction 2), -lr / bias correction 1].
+        # Per-agent Adam coefficients [sqrt(bias correction 2), -lr / bias correction 1],
+        # computed in float64 like torch.optim.Adam, by step (index 0 unused).
+        steps = np.arange(ADAM_TABLE_STEPS + 1, dtype=np.float64)
+        with np.errstate(divide="ignore"):
+            self._adam_table = np.stack(
+                [np.sqrt(1.0 - BETAS[1] ** steps), -learning_rate / (1.0 - BETAS[0] ** steps)]
+            ).astype(np.float32)
         self._coefficients_host = np.zeros((2, k, 1), dtype=np.float32)
         host = torch.from_numpy(self._coefficients_host)
         self._coefficients = host if self.device.type == "cpu" else host.to(self.device)
         self._eps = torch.tensor(EPS, device=self.device)
         self._zero = torch.tensor(0.0, device=self.device)
-        self._scratch = torch.empty(max(thetas.shape[1], omegas.shape[1]) * k, device=self.device)
+        self._adam_views = [
+            (params, grad, *moments, torch.empty_like(grad))
+            for params, grad, moments in (
+                (self.critic_params[0], self.critic_grad, self.critic_moments),
+                (self.actor_params[1], self.actor_grad, self.actor_moments),
+            )
+        ]
 
         self._actor_weights = self.actor_layout.views(self.actor_params.view(2 * k, -1))
         self._critic_weights = self.critic_layout.views(self.critic_params.view(2 * k, -1))
@@ -194,8 +208,11 @@ class LeanDDPG:
         self._actor_grads = self.actor_layout.views(self.actor_grad)
         self._critic_grads = self.critic_layout.views(self.critic_grad)
         self._batch_size = 0
-        self._act_buffers = self._hidden(self.actor_layout, k, 1, out_rows=act_size)
-        self._act_input = self._with_ones(k, obs_size + 1, 1)
+        act_input = self._with_ones(k, obs_size + 1, 1, ones_at=-2)
+        self._act_obs = act_input[:, :-1, 0]
+        self._act_pass = _forward_steps(
+            self._actor_online, act_input, self._hidden(self.actor_layout, k, 1, act_size)
+        )
 
     # ----------------------------------------------------------------- parameters in and out
     def _internal(self, layout: _Layout, flat: np.ndarray) -> torch.Tensor:
@@ -259,23 +276,63 @@ class LeanDDPG:
         return hidden
 
     def _allocate(self, batch: int) -> None:
-        k, obs, act = self.agents, self.obs_size, self.act_size
+        """Buffers for batch size ``batch`` and every view the update uses (made once)."""
+        k, obs, act, device = self.agents, self.obs_size, self.act_size, self.device
         # Critic inputs, sample-major, slots: 0 (a, s, 1), 1 (mu'(s'), s', 1), 2 (mu(s), s, 1).
-        self._x = self._with_ones(3, k, batch, act + obs + 1)
-        self._actor_h = self._hidden(self.actor_layout, 2 * k, batch, out_rows=act)
-        self._critic_h = self._hidden(self.critic_layout, 2 * k, batch, out_rows=1)
-        self._dh = [
-            torch.empty(k, out, batch, device=self.device)
-            for _, out, _ in self.critic_layout.blocks[:-1]
+        x = self._with_ones(3, k, batch, act + obs + 1)
+        self._fill = (x[0, :, :, :act], x[0::2, :, :, act : act + obs], x[1, :, :, act : act + obs])
+        actor_h = self._hidden(self.actor_layout, 2 * k, batch, out_rows=act)
+        critic_h = self._hidden(self.critic_layout, 2 * k, batch, out_rows=1)
+        actor_pair = x[1:].view(2 * k, batch, -1)  # target actor reads s', online actor s
+        # Actor on s and target actor on s' in one pass; mu lands in slots 2 and 1.
+        self._actor_pass = _forward_steps(
+            self._actor_weights, actor_pair[:, :, act:].transpose(1, 2), actor_h
+        )
+        self._actor_output = actor_pair[:, :, :act].transpose(1, 2)
+        # Critic on (s, a) and target critic on (s', mu'(s')) in one pass.
+        self._critic_pass = _forward_steps(
+            self._critic_weights, x[:2].view(2 * k, batch, -1).transpose(1, 2), critic_h
+        )
+        self._q, self._q_next = critic_h[-1][:k], critic_h[-1][k:]
+        self._dq = torch.empty(k, 1, batch, device=device)
+        self._losses = torch.empty(2, k, 1, 1, device=device)
+        hidden = [h[:k] for h in critic_h[:-1]]
+        dh = [torch.empty(k, out, batch, device=device) for _, out, _ in self.critic_layout.blocks]
+        self._critic_backward = _backward_steps(
+            self._critic_online, x[0], hidden, self._dq, self._critic_grads, dh
+        )
+        # The actor's loss through the online critic at (mu(s), s), reusing the buffers.
+        self._q_actor = torch.empty(k, 1, batch, device=device)
+        self._critic_actor_pass = _forward_steps(
+            self._critic_online, x[2].transpose(1, 2), [*hidden, self._q_actor]
+        )
+        # dQ/dh at the last hidden layer is the output weight row for every sample:
+        # (activation, weight row as a column, where dz goes), then products down to a.
+        last = len(hidden) - 1
+        self._output_row = (
+            hidden[last][:, :-1],
+            self._critic_online[-1][:, :, :-1].transpose(1, 2),
+            dh[last],
+        )
+        self._critic_input_backward = []
+        for layer in range(last, 0, -1):
+            weight_t = self._critic_online[layer][:, :, :-1].transpose(1, 2)
+            step = (weight_t, dh[layer], dh[layer - 1], hidden[layer - 1][:, :-1])
+            self._critic_input_backward.append(step)
+        self._dmu = torch.empty(k, act, batch, device=device)
+        self._action_columns = (self._critic_online[0][:, :, :act].transpose(1, 2), dh[0])
+        self._mu = x[2, :, :, :act].transpose(1, 2)
+        dh_actor = [
+            torch.empty(k, out, batch, device=device) for _, out, _ in self.actor_layout.blocks
         ]
-        self._dh_actor = [
-            torch.empty(k, out, batch, device=self.device)
-            for _, out, _ in self.actor_layout.blocks[:-1]
-        ]
-        self._dq = torch.empty(k, 1, batch, device=self.device)
-        self._dmu = torch.empty(k, act, batch, device=self.device)
-        self._q_actor = torch.empty(k, 1, batch, device=self.device)
-        self._losses = torch.empty(2, k, 1, 1, device=self.device)
+        self._actor_backward = _backward_steps(
+            self._actor_online,
+            x[2, :, :, act:],
+            [h[k:] for h in actor_h[:-1]],
+            self._dmu,
+            self._actor_grads,
+            dh_actor,
+        )
         self._batch_size = batch
 
     # ----------------------------------------------------------------------------- update
@@ -288,134 +345,131 @@ class LeanDDPG:
             raise ValueError(f"batch has {k} agents, the learner {self.agents}")
         if size != self._batch_size:
             self._allocate(size)
-        act, o = self.act_size, self.obs_size
-        x = self._x
-        x[0, :, :, :act].copy_(actions)
-        x[0::2, :, :, act : act + o].copy_(obs)  # slots 0 and 2
-        x[1, :, :, act : act + o].copy_(next_obs)
+        for buffer, values in zip(self._fill, (actions, obs, next_obs), strict=True):
+            buffer.copy_(values)
         self._next_step()
 
-        # Actor on s and target actor on s' in one pass; mu lands in slots 2 and 1.
-        actor_in = x[1:].view(2 * k, size, -1)
-        mu = self._forward(self._actor_weights, actor_in[:, :, act:], self._actor_h)
-        torch.sigmoid(mu, out=actor_in[:, :, :act].transpose(1, 2))
-
-        # Critic on (s, a) and target critic on (s', mu'(s')) in one pass.
-        q = self._forward(self._critic_weights, x[:2].view(2 * k, size, -1), self._critic_h)
+        torch.sigmoid(_forward(self._actor_pass), out=self._actor_output)
+        _forward(self._critic_pass)
         target = torch.addcmul(
-            rewards.transpose(1, 2), not_done.transpose(1, 2), q[k:], value=self.gamma
+            rewards.transpose(1, 2), not_done.transpose(1, 2), self._q_next, value=self.gamma
         )
-        dq = torch.sub(q[:k], target, out=self._dq)
+        dq = torch.sub(self._q, target, out=self._dq)
         torch.bmm(dq, dq.transpose(1, 2), out=self._losses[0])  # sum of squares per agent
         dq.mul_(2.0 / size)  # d(mean squared error)/dq
-        hidden = [h[:k] for h in self._critic_h[:-1]]
-        self._backward(self._critic_online, hidden, x[0], dq, self._critic_grads, self._dh)
-        self._adam(self.critic_params[0], self.critic_grad, self.critic_moments)
+        _backward(self._critic_backward)
+        self._adam(*self._adam_views[0])
 
         # Actor loss -mean Q(s, mu(s)) through the updated critic; critic weights stay put.
-        q_actor = self._forward(self._critic_online, x[2], hidden, out=self._q_actor)
-        torch.sum(q_actor, dim=2, keepdim=True, out=self._losses[1])
-        dmu = self._critic_action_gradient(hidden, 1.0 / size)
-        _sigmoid_backward_(dmu, x[2, :, :, :act].transpose(1, 2))
-        actor_hidden = [h[k:] for h in self._actor_h[:-1]]
-        self._backward(
-            self._actor_online,
-            actor_hidden,
-            x[2, :, :, act:],
-            dmu,
-            self._actor_grads,
-            self._dh_actor,
-        )
-        self._adam(self.actor_params[1], self.actor_grad, self.actor_moments)
+        torch.sum(_forward(self._critic_actor_pass), dim=2, keepdim=True, out=self._losses[1])
+        h, row, dz = self._output_row
+        # dz = dh * s (1 - s) with dh = -row / B: the first product already holds the s.
+        torch.addcmul(self._zero, h, row, value=-1.0 / size, out=dz).addcmul_(dz, h, value=-1.0)
+        for weight_t, dz, dh, s in self._critic_input_backward:
+            _sigmoid_backward_(torch.bmm(weight_t, dz, out=dh), s)
+        action_columns, dz = self._action_columns
+        _sigmoid_backward_(torch.bmm(action_columns, dz, out=self._dmu), self._mu)
+        _backward(self._actor_backward)
+        self._adam(*self._adam_views[1])
 
         self.actor_params[0].lerp_(self.actor_params[1], self.tau)
         self.critic_params[1].lerp_(self.critic_params[0], self.tau)
         losses = self._losses.view(2, k).cpu().numpy()
         return losses[0] / size, losses[1] / -size
 
-    def _forward(
-        self,
-        weights: list[torch.Tensor],
-        x: torch.Tensor,
-        hidden: list[torch.Tensor],
-        out: torch.Tensor | None = None,
-    ) -> torch.Tensor:
-        """Sigmoid MLP on sample-major input ``x [m, B, in + 1]`` (last column ones): hidden
-        activations into ``hidden`` (feature-major, ones row kept), returns the output layer's
-        pre-activation ``[m, out, B]`` (in ``out`` or the last ``hidden`` buffer)."""
-        h = x.transpose(1, 2)
-        for weight, buffer in zip(weights[:-1], hidden, strict=False):
-            values = buffer[:, :-1]
-            torch.bmm(weight, h, out=values)
-            values.sigmoid_()
-            h = buffer
-        return torch.bmm(weights[-1], h, out=hidden[-1] if out is None else out)
-
-    def _backward(
-        self,
-        weights: list[torch.Tensor],
-        hidden: list[torch.Tensor],
-        x: torch.Tensor,
-        dz: torch.Tensor,
-        grads: list[torch.Tensor],
-        scratch: list[torch.Tensor],
-    ) -> None:
-        """Weight gradients of a sigmoid MLP from the output pre-activation's gradient
-        ``dz [m, out, B]``, the kept activations and the input ``x [m, B, in + 1]``."""
-        for layer in range(len(weights) - 1, 0, -1):
-            h = hidden[layer - 1]
-            torch.bmm(dz, h.transpose(1, 2), out=grads[layer])  # weights and bias at once
-            dh = torch.bmm(weights[layer][:, :, :-1].transpose(1, 2), dz, out=scratch[layer - 1])
-            dz = _sigmoid_backward_(dh, h[:, :-1])
-        torch.bmm(dz, x, out=grads[0])
-
-    def _critic_action_gradient(self, hidden: list[torch.Tensor], scale: float) -> torch.Tensor:
-        """``d(-scale * sum Q)/d a`` of the online critic at the kept activations ``hidden``
-        (inputs were ``(a, s, 1)``): ``[k, n, B]``."""
-        weights, dh = self._critic_online, self._dh
-        # dQ/dh3 is the output weight row for every sample: fold it into the first product.
-        dz = torch.addcmul(
-            self._zero,
-            hidden[-1][:, :-1],
-            weights[-1][:, :, :-1].transpose(1, 2),
-            value=-scale,
-            out=dh[-1],
-        )
-        dz.addcmul_(dz, hidden[-1][:, :-1], value=-1.0)  # times s (1 - s)
-        for layer in range(len(weights) - 2, 0, -1):
-            h = hidden[layer - 1]
-            dh_prev = torch.bmm(weights[layer][:, :, :-1].transpose(1, 2), dz, out=dh[layer - 1])
-            dz = _sigmoid_backward_(dh_prev, h[:, :-1])
-        return torch.bmm(weights[0][:, :, : self.act_size].transpose(1, 2), dz, out=self._dmu)
-
     def _next_step(self) -> None:
         """Advance every agent's Adam step and refresh the bias-corrected coefficients."""
         self.steps += 1
-        beta1, beta2 = BETAS
-        self._coefficients_host[0, :, 0] = np.sqrt(1.0 - beta2**self.steps)
-        self._coefficients_host[1, :, 0] = -self.learning_rate / (1.0 - beta1**self.steps)
+        self._coefficients_host[:, :, 0] = self._adam_table[
+            :, np.minimum(self.steps, ADAM_TABLE_STEPS)
+        ]
         if self._coefficients.device.type != "cpu":
             self._coefficients.copy_(torch.from_numpy(self._coefficients_host))
 
-    def _adam(self, params: torch.Tensor, grad: torch.Tensor, moments: torch.Tensor) -> None:
-        """``torch.optim.Adam`` on ``[k, P]`` with per-agent bias corrections."""
+    def _adam(
+        self,
+        params: torch.Tensor,
+        grad: torch.Tensor,
+        exp_avg: torch.Tensor,
+        exp_avg_sq: torch.Tensor,
+        denom: torch.Tensor,
+    ) -> None:
+        """``torch.optim.Adam`` on ``[k, P]`` with per-agent bias corrections: ``param -=
+        lr / bc1 * m / (sqrt(v) / sqrt(bc2) + eps)``."""
         beta1, beta2 = BETAS
-        exp_avg, exp_avg_sq = moments
         exp_avg.lerp_(grad, 1.0 - beta1)
         exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1.0 - beta2)
-        denom = torch.sqrt(exp_avg_sq, out=self._scratch[: grad.numel()].view_as(grad))
+        torch.sqrt(exp_avg_sq, out=denom)
         torch.addcdiv(self._eps, denom, self._coefficients[0], out=denom)
         params.addcmul_(torch.div(exp_avg, denom, out=denom), self._coefficients[1])
 
     # -------------------------------------------------------------------------- acting
     def act(self, obs: torch.Tensor) -> torch.Tensor:
         """Greedy actions ``[k, n]`` of the online Actors for one observation each ``[k, o]``."""
-        self._act_input[:, :-1, 0].copy_(obs)
-        h = self._act_input
-        for weight, buffer in zip(self._actor_online[:-1], self._act_buffers, strict=False):
-            torch.bmm(weight, h, out=buffer[:, :-1]).sigmoid_()
-            h = buffer
-        return torch.bmm(self._actor_online[-1], h)[:, :, 0].sigmoid_()
+        self._act_obs.copy_(obs)
+        return torch.sigmoid(_forward(self._act_pass)[:, :, 0])
+
+
+_Product = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _forward_steps(
+    weights: list[torch.Tensor], inputs: torch.Tensor, buffers: list[torch.Tensor]
+) -> list[_Product]:
+    """``(weight, input, output)`` per layer of a sigmoid MLP on feature-major ``inputs
+    [m, in + 1, B]`` (last row ones): each hidden layer writes above its buffer's ones row,
+    the output layer fills its buffer."""
+    steps = []
+    for weight, buffer in zip(weights, buffers, strict=True):
+        output = buffer[:, :-1] if len(steps) < len(weights) - 1 else buffer
+        steps.append((weight, inputs, output))
+        inputs = buffer
+    return steps
+
+
+def _forward(steps: list[_Product]) -> torch.Tensor:
+    """Run :func:`_forward_steps`' products (sigmoid after each hidden layer, in place);
+    returns the output layer's pre-activation ``[m, out, B]``."""
+    for weight, inputs, output in steps[:-1]:
+        torch.bmm(weight, inputs, out=output).sigmoid_()
+    weight, inputs, output = steps[-1]
+    return torch.bmm(weight, inputs, out=output)
+
+
+def _backward_steps(
+    weights: list[torch.Tensor],
+    x: torch.Tensor,
+    hidden: list[torch.Tensor],
+    dz: torch.Tensor,
+    grads: list[torch.Tensor],
+    scratch: list[torch.Tensor],
+) -> list[tuple[torch.Tensor, ...]]:
+    """Views for :func:`_backward`: per layer from the last, ``(dz, input^T, gradient,
+    weight^T without the bias, dh below, activation below)``, then ``(dz, x, gradient)`` for
+    the first layer (``x [m, B, in + 1]`` sample-major)."""
+    steps = []
+    for layer in range(len(weights) - 1, 0, -1):
+        h = hidden[layer - 1]
+        below = scratch[layer - 1]
+        weight_t = weights[layer][:, :, :-1].transpose(1, 2)
+        steps.append((dz, h.transpose(1, 2), grads[layer], weight_t, below, h[:, :-1]))
+        dz = below
+    steps.append((dz, x, grads[0]))
+    return steps
+
+
+def _backward(steps: list[tuple[torch.Tensor, ...]]) -> None:
+    """Weight gradients (bias included: the ones row) of a sigmoid MLP from the output
+    pre-activation's gradient, reusing the kept activations; see :func:`_backward_steps`."""
+    for dz, inputs_t, grad, weight_t, dh, s in steps[:-1]:
+        torch.bmm(dz, inputs_t, out=grad)
+        if weight_t.shape[2] == 1:  # a one-unit layer: an outer product, cheaper as a product
+            torch.mul(weight_t, dz, out=dh)
+        else:
+            torch.bmm(weight_t, dz, out=dh)
+        _sigmoid_backward_(dh, s)
+    dz, x, grad = steps[-1]
+    torch.bmm(dz, x, out=grad)
 
 
 def _sigmoid_backward_(grad: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
