@@ -1,60 +1,81 @@
-"""DDPG throughput: batched updates per agent for k agents, and lonlib versus SB3.
+"""DDPG speed: one update (lean versus autograd) beside its targets, k agents batched, and
+lonlib's local search versus Stable-Baselines3's DDPG.
 
-Both sides use one torch thread, the paper's networks (sigmoid MLPs 20-20-20), batch 2000,
-buffer 40 000, lr 1e-3, gamma 0.99, tau 0.005, N(0, 0.1) action noise and one gradient step
-per environment step on the two-cart task.
+Everything runs on one torch thread with the paper's networks (sigmoid MLPs 20-20-20, two
+carts), buffer 40 000, lr 1e-3, gamma 0.99, tau 0.005 and N(0, 0.1) action noise. The
+machine is shared, so every figure is the median of several runs, lean and autograd runs
+alternate, and the load average is reported beside them.
 """
 
 from __future__ import annotations
 
-import copy
+import os
+import statistics
 import time
+from collections.abc import Callable
 
 import numpy as np
 import torch
 
-from benchmarks.common import report
-from lonlib.ddpg import DDPGConfig, ReplayBuffer, _update, local_search
-from lonlib.nets import BatchedMLP, actor_spec, critic_spec
+from benchmarks.common import RESULTS, report
+from lonlib.ddpg import DDPGConfig, ReplayBuffer, local_search
+from lonlib.ddpg_update import make_learner
+from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
 
 HP = DDPGConfig(warmup_steps=2000, min_steps=0, patience_steps=10**9)
 ENV = PendulumConfig(n_carts=2)
+TARGET_MS = {2000: 1.2, 256: 0.3}  # issue 12: one update, k = 1, one thread
+REPEATS = int(os.environ.get("BENCH_REPEATS", "5"))
 
 
-def updates_per_second_per_agent(k: int, updates: int = 20, threads: int = 1) -> float:
-    """Batched DDPG updates of ``k`` agents on a full replay buffer of random transitions."""
-    torch.set_num_threads(threads)
+def make_update(kind: str, k: int, batch: int) -> Callable[[], object]:
+    """One DDPG update of ``k`` agents (``kind`` ``"lean"`` or ``"autograd"``) on a batch
+    sampled from a full replay buffer of random transitions (a tenth of them terminal)."""
     rng = np.random.default_rng(0)
     a_spec, c_spec = actor_spec(2), critic_spec(2)
-    actor = BatchedMLP(a_spec, np.stack([a_spec.initial(rng) for _ in range(k)]))
-    critic = BatchedMLP(c_spec, np.stack([c_spec.initial(rng) for _ in range(k)]))
-    targets = copy.deepcopy(actor), copy.deepcopy(critic)
-    optims = [torch.optim.Adam(m.parameters(), lr=1e-3, fused=True) for m in (actor, critic)]
+    learner = make_learner(
+        kind,
+        a_spec,
+        c_spec,
+        np.stack([a_spec.initial(rng) for _ in range(k)]),
+        np.stack([c_spec.initial(rng) for _ in range(k)]),
+        learning_rate=HP.learning_rate,
+        gamma=HP.gamma,
+        tau=HP.tau,
+    )
     replay = ReplayBuffer(k, HP.buffer_size, 20, 2, torch.device("cpu"))
     replay.data.uniform_()
-    replay.data[..., -1] = 1.0  # no terminal transitions
+    replay.data[..., -1] = (replay.data[..., -1] > 0.1).float()
     replay.size = HP.buffer_size
-
-    def one() -> None:
-        idx = np.stack([rng.integers(0, replay.size, HP.batch_size) for _ in range(k)])
-        _update(replay.sample(idx), actor, critic, *targets, optims[0], optims[1], HP)
-
-    for _ in range(3):
-        one()
-    start = time.perf_counter()
-    for _ in range(updates):
-        one()
-    return updates * k / (time.perf_counter() - start)
+    sample = replay.sample(rng.integers(0, replay.size, (k, batch)))
+    return lambda: learner.update(sample)
 
 
-def lonlib_seconds_per_2000_training_steps() -> float:
+def update_ms(k: int, batch: int, updates: int = 40) -> dict[str, list[float]]:
+    """Milliseconds per update of each learner, one value per run of ``updates`` updates;
+    lean and autograd runs alternate so both see the same load."""
+    work = {kind: make_update(kind, k, batch) for kind in ("lean", "autograd")}
+    times: dict[str, list[float]] = {kind: [] for kind in work}
+    for one in work.values():
+        for _ in range(5):
+            one()
+    for _ in range(REPEATS):
+        for kind, one in work.items():
+            start = time.perf_counter()
+            for _ in range(updates):
+                one()
+            times[kind].append((time.perf_counter() - start) / updates * 1e3)
+    return times
+
+
+def lonlib_seconds_per_2000_training_steps(update: str) -> float:
     """Wall time of 2000 environment steps with training in lonlib's local search (k = 1)."""
     rng = np.random.default_rng(0)
     theta, omega = actor_spec(2).initial(rng), critic_spec(2).initial(rng)
 
     def run(steps: int) -> float:
-        hp = DDPGConfig(**{**HP.__dict__, "max_steps": steps})
+        hp = DDPGConfig(**{**HP.__dict__, "max_steps": steps, "update": update})
         start = time.perf_counter()
         local_search(theta, omega, ENV, hp, seed=0)
         return time.perf_counter() - start
@@ -62,7 +83,7 @@ def lonlib_seconds_per_2000_training_steps() -> float:
     return run(4000) - run(2000)
 
 
-def sb3_seconds_per_2000_training_steps(threads: int = 1) -> float | None:
+def sb3_seconds_per_2000_training_steps() -> float | None:
     """The same for Stable-Baselines3's DDPG on the Gymnasium env (None if not installed)."""
     try:
         import gymnasium as gym
@@ -71,8 +92,6 @@ def sb3_seconds_per_2000_training_steps(threads: int = 1) -> float | None:
     except ImportError:
         return None
     import lonlib  # noqa: F401  (registers the env)
-
-    torch.set_num_threads(threads)
 
     def run(steps: int) -> float:
         env = gym.make(lonlib.ENV_ID, n_carts=2)
@@ -99,40 +118,101 @@ def sb3_seconds_per_2000_training_steps(threads: int = 1) -> float | None:
     return run(4000) - run(2000)
 
 
-def main() -> None:
-    """Run the DDPG benchmarks and report them (one and two torch threads on both sides)."""
+def _median(values: list[float]) -> float:
+    return statistics.median(values)
+
+
+def update_rows() -> list[dict]:
+    """One row per (batch, k): lean and autograd medians, spread, speed-up, target."""
     rows = []
-    ours = lonlib_seconds_per_2000_training_steps()
-    for threads in (1, 2):
-        sb3 = sb3_seconds_per_2000_training_steps(threads)
-        sb3_rate = 2000 / sb3 if sb3 else None
-        for k in (1, 16, 64):
-            rate = updates_per_second_per_agent(k, threads=threads)
+    for batch in (2000, 256):
+        for k in (1, 3, 16):
+            times = update_ms(k, batch)
+            lean, reference = _median(times["lean"]), _median(times["autograd"])
             rows.append(
                 {
-                    "measure": f"updates/s per agent, k = {k}",
-                    "threads": threads,
-                    "value": rate,
-                    "x SB3 steps/s": rate / sb3_rate if sb3 else None,
+                    "update": f"batch {batch}, k = {k}",
+                    "lean ms": lean,
+                    "lean range": f"{min(times['lean']):.3g}-{max(times['lean']):.3g}",
+                    "autograd ms": reference,
+                    "speed-up": reference / lean,
+                    "lean ms per agent": lean / k,
+                    "target ms": TARGET_MS[batch] if k == 1 else None,
+                    "met": ("yes" if lean <= TARGET_MS[batch] else "no") if k == 1 else None,
                 }
             )
-        if sb3:
-            rows.append(
-                {
-                    "measure": "SB3 DDPG: s per 2000 training env-steps",
-                    "threads": threads,
-                    "value": sb3,
-                }
-            )
-        else:
-            rows.append({"measure": "SB3 not installed (pip install -e .[bench])", "value": None})
-    torch.set_num_threads(1)
-    rows.append(
-        {"measure": "lonlib: s per 2000 training env-steps (k = 1)", "threads": 1, "value": ours}
-    )
-    sb3_one = next((r["value"] for r in rows if r["measure"].startswith("SB3 DDPG")), None)
-    if sb3_one:
-        rows.append(
-            {"measure": "SB3 time / lonlib time (k = 1)", "threads": 1, "value": sb3_one / ours}
+    return rows
+
+
+def training_rows() -> list[dict]:
+    """Seconds per 2000 training env-steps (k = 1, batch 2000): lonlib lean, autograd, SB3."""
+    rows = []
+    measured = {}
+    for name, measure in (
+        ("lonlib, lean update", lambda: lonlib_seconds_per_2000_training_steps("lean")),
+        ("lonlib, autograd update", lambda: lonlib_seconds_per_2000_training_steps("autograd")),
+        ("Stable-Baselines3 DDPG", sb3_seconds_per_2000_training_steps),
+    ):
+        values = [measure() for _ in range(max(1, REPEATS // 2))]
+        if None in values:
+            rows.append({"training": f"{name}: not installed (pip install -e .[bench])"})
+            continue
+        measured[name] = _median(values)
+        rows.append({"training": name, "s per 2000 steps": measured[name]})
+    sb3 = measured.get("Stable-Baselines3 DDPG")
+    for row in rows:
+        if sb3 and "s per 2000 steps" in row:
+            row["SB3 time / this"] = sb3 / row["s per 2000 steps"]
+    return rows
+
+
+def markdown(update: list[dict], training: list[dict], load: tuple[float, float]) -> str:
+    """The README's DDPG speed table (``benchmarks/results/ddpg.md``)."""
+    lines = [
+        "| DDPG, one thread | lean | autograd | lean speed-up | target |",
+        "|---|---|---|---|---|",
+    ]
+    for row in update:
+        target = f"<= {row['target ms']} ms ({row['met']})" if row["target ms"] else ""
+        per_agent = (
+            f" ({row['lean ms per agent']:.3g} per agent)" if "k = 1" not in row["update"] else ""
         )
-    report("ddpg", rows)
+        lines.append(
+            f"| one update, {row['update']} | {row['lean ms']:.3g} ms{per_agent} "
+            f"| {row['autograd ms']:.3g} ms | {row['speed-up']:.2g}x | {target} |"
+        )
+    by_name = {row["training"]: row for row in training if "s per 2000 steps" in row}
+    lean = by_name.get("lonlib, lean update")
+    reference = by_name.get("lonlib, autograd update")
+    sb3 = by_name.get("Stable-Baselines3 DDPG")
+    if lean and reference:
+        ratio = (
+            f"; SB3 {sb3['s per 2000 steps']:.3g} s ({lean['SB3 time / this']:.2g}x lean)"
+            if sb3
+            else ""
+        )
+        lines.append(
+            f"| 2000 training env-steps, batch 2000, k = 1 | {lean['s per 2000 steps']:.3g} s "
+            f"| {reference['s per 2000 steps']:.3g} s "
+            f"| {reference['s per 2000 steps'] / lean['s per 2000 steps']:.2g}x{ratio} | |"
+        )
+    lines.append(
+        f"\nMedians of {REPEATS} runs (training: {max(1, REPEATS // 2)}); load average "
+        f"{load[0]:.1f} before, {load[1]:.1f} after, on {os.cpu_count()} cores."
+    )
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    """Run the DDPG benchmarks, print them and write results/ddpg.json and results/ddpg.md."""
+    torch.set_num_threads(1)
+    before = os.getloadavg()[0]
+    update = update_rows()
+    report("ddpg_update", update)
+    training = training_rows()
+    report("ddpg_training", training)
+    after = os.getloadavg()[0]
+    print(f"load average (1 min): {before:.1f} before, {after:.1f} after")
+    table = markdown(update, training, (before, after))
+    (RESULTS / "ddpg.md").write_text(table)
+    print(f"\n{table}")

@@ -192,7 +192,6 @@ class LeanDDPG:
         host = torch.from_numpy(self._coefficients_host)
         self._coefficients = host if self.device.type == "cpu" else host.to(self.device)
         self._eps = torch.tensor(EPS, device=self.device)
-        self._zero = torch.tensor(0.0, device=self.device)
         self._adam_views = [
             (params, grad, *moments, torch.empty_like(grad))
             for params, grad, moments in (
@@ -295,6 +294,7 @@ class LeanDDPG:
         )
         self._q, self._q_next = critic_h[-1][:k], critic_h[-1][k:]
         self._dq = torch.empty(k, 1, batch, device=device)
+        self._target = torch.empty(k, 1, batch, device=device)
         self._losses = torch.empty(2, k, 1, 1, device=device)
         hidden = [h[:k] for h in critic_h[:-1]]
         dh = [torch.empty(k, out, batch, device=device) for _, out, _ in self.critic_layout.blocks]
@@ -314,6 +314,7 @@ class LeanDDPG:
             self._critic_online[-1][:, :, :-1].transpose(1, 2),
             dh[last],
         )
+        self._row = torch.empty(k, self._output_row[1].shape[1], 1, device=device)
         self._critic_input_backward = []
         for layer in range(last, 0, -1):
             weight_t = self._critic_online[layer][:, :, :-1].transpose(1, 2)
@@ -352,7 +353,11 @@ class LeanDDPG:
         torch.sigmoid(_forward(self._actor_pass), out=self._actor_output)
         _forward(self._critic_pass)
         target = torch.addcmul(
-            rewards.transpose(1, 2), not_done.transpose(1, 2), self._q_next, value=self.gamma
+            rewards.transpose(1, 2),
+            not_done.transpose(1, 2),
+            self._q_next,
+            value=self.gamma,
+            out=self._target,
         )
         dq = torch.sub(self._q, target, out=self._dq)
         torch.bmm(dq, dq.transpose(1, 2), out=self._losses[0])  # sum of squares per agent
@@ -363,8 +368,8 @@ class LeanDDPG:
         # Actor loss -mean Q(s, mu(s)) through the updated critic; critic weights stay put.
         torch.sum(_forward(self._critic_actor_pass), dim=2, keepdim=True, out=self._losses[1])
         h, row, dz = self._output_row
-        # dz = dh * s (1 - s) with dh = -row / B: the first product already holds the s.
-        torch.addcmul(self._zero, h, row, value=-1.0 / size, out=dz).addcmul_(dz, h, value=-1.0)
+        # d(-sum Q / B)/dh is the output weight row over -B for every sample (broadcast).
+        _sigmoid_backward_(torch.mul(row, -1.0 / size, out=self._row), h, out=dz)
         for weight_t, dz, dh, s in self._critic_input_backward:
             _sigmoid_backward_(torch.bmm(weight_t, dz, out=dh), s)
         action_columns, dz = self._action_columns
@@ -472,6 +477,11 @@ def _backward(steps: list[tuple[torch.Tensor, ...]]) -> None:
     torch.bmm(dz, x, out=grad)
 
 
-def _sigmoid_backward_(grad: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
-    """``grad * s * (1 - s)`` in place: the sigmoid's derivative from its output ``s``."""
-    return grad.mul_(s).addcmul_(grad, s, value=-1.0)
+def _sigmoid_backward_(
+    grad: torch.Tensor, s: torch.Tensor, out: torch.Tensor | None = None
+) -> torch.Tensor:
+    """``grad * s * (1 - s)``, the sigmoid's derivative from its kept output ``s``, in one
+    pass (ATen's ``sigmoid_backward`` kernel), into ``out`` or in place into ``grad``."""
+    return torch.ops.aten.sigmoid_backward.grad_input(
+        grad, s, grad_input=grad if out is None else out
+    )

@@ -118,13 +118,18 @@ def test_bad_shapes_and_kinds_are_refused():
         LeanDDPG(actor_spec(2), critic_spec(2), thetas, omegas, **HP).reset_agent(2, *initial(2, 1))
 
 
-def test_local_search_is_the_same_with_either_learner():
+@pytest.mark.parametrize("device", DEVICES)
+def test_local_search_is_the_same_with_either_learner(device):
     env = PendulumConfig(n_carts=1, steps=40, initial_noise=0.02)
     base = {"batch_size": 32, "buffer_size": 500, "warmup_steps": 50, "max_steps": 160}
     thetas, omegas = initial(1, 2)
     runs = {
         kind: local_search_batch(
-            thetas, omegas, env, DDPGConfig(min_steps=0, update=kind, **base), seeds=[1, 2]
+            thetas,
+            omegas,
+            env,
+            DDPGConfig(min_steps=0, update=kind, device=device, **base),
+            seeds=[1, 2],
         )
         for kind in ("lean", "autograd")
     }
