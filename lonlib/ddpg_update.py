@@ -34,6 +34,7 @@ from typing import Protocol
 import numpy as np
 import torch
 
+from lonlib.ddpg_autograd import AutogradDDPG
 from lonlib.nets import NetSpec
 
 BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults, as the autograd reference uses
@@ -76,8 +77,6 @@ def make_learner(
     device: str | torch.device = "cpu",
 ) -> Learner:
     """The ``"lean"`` (:class:`LeanDDPG`) or ``"autograd"`` learner for ``k`` agents."""
-    from lonlib.ddpg_autograd import AutogradDDPG
-
     classes = {"lean": LeanDDPG, "autograd": AutogradDDPG}
     if kind not in classes:
         raise ValueError(f"update must be one of {LEARNERS}, got {kind!r}")
