@@ -190,6 +190,7 @@ class LeanDDPG:
         self._coefficients_host = np.zeros((2, k, 1), dtype=np.float32)
         host = torch.from_numpy(self._coefficients_host)
         self._coefficients = host if self.device.type == "cpu" else host.to(self.device)
+        self._bias_correction, self._step_size = self._coefficients.unbind(0)
         self._eps = torch.tensor(EPS, device=self.device)
         self._adam_views = [
             (params, grad, *moments, torch.empty_like(grad))
@@ -291,10 +292,13 @@ class LeanDDPG:
         self._critic_pass = _forward_steps(
             self._critic_weights, x[:2].view(2 * k, batch, -1).transpose(1, 2), critic_h
         )
-        self._q, self._q_next = critic_h[-1][:k], critic_h[-1][k:]
+        # Q(s, a), Q'(s', mu'(s')), the TD target and dQ as [k, B, 1] views, like r and not_done.
+        self._q, self._q_next = (q.view(k, batch, 1) for q in critic_h[-1].split(k))
+        self._target = torch.empty(k, batch, 1, device=device)
         self._dq = torch.empty(k, 1, batch, device=device)
-        self._target = torch.empty(k, 1, batch, device=device)
-        self._losses = torch.empty(2, k, 1, 1, device=device)
+        self._dq_rows = self._dq.view(k, batch, 1)
+        self._losses = torch.empty(2, k, 1, 1, device=device)  # sums: (q - y)^2 and q(s, mu)
+        self._loss_views = (self._dq, self._dq_rows, *self._losses, self._losses.view(2, k))
         hidden = [h[:k] for h in critic_h[:-1]]
         dh = [torch.empty(k, out, batch, device=device) for _, out, _ in self.critic_layout.blocks]
         self._critic_backward = _backward_steps(
@@ -351,21 +355,16 @@ class LeanDDPG:
 
         torch.sigmoid(_forward(self._actor_pass), out=self._actor_output)
         _forward(self._critic_pass)
-        target = torch.addcmul(
-            rewards.transpose(1, 2),
-            not_done.transpose(1, 2),
-            self._q_next,
-            value=self.gamma,
-            out=self._target,
-        )
-        dq = torch.sub(self._q, target, out=self._dq)
-        torch.bmm(dq, dq.transpose(1, 2), out=self._losses[0])  # sum of squares per agent
+        dq, dq_rows, critic_loss, actor_loss, losses = self._loss_views
+        target = torch.addcmul(rewards, not_done, self._q_next, value=self.gamma, out=self._target)
+        torch.sub(self._q, target, out=dq_rows)
+        torch.bmm(dq, dq_rows, out=critic_loss)  # sum of squares per agent
         dq.mul_(2.0 / size)  # d(mean squared error)/dq
         _backward(self._critic_backward)
         self._adam(*self._adam_views[0])
 
         # Actor loss -mean Q(s, mu(s)) through the updated critic; critic weights stay put.
-        torch.sum(_forward(self._critic_actor_pass), dim=2, keepdim=True, out=self._losses[1])
+        torch.sum(_forward(self._critic_actor_pass), dim=2, keepdim=True, out=actor_loss)
         h, row, dz = self._output_row
         # d(-sum Q / B)/dh is the output weight row over -B for every sample (broadcast).
         _sigmoid_backward_(torch.mul(row, -1.0 / size, out=self._row), h, out=dz)
@@ -378,7 +377,7 @@ class LeanDDPG:
 
         self.actor_params[0].lerp_(self.actor_params[1], self.tau)
         self.critic_params[1].lerp_(self.critic_params[0], self.tau)
-        losses = self._losses.view(2, k).cpu().numpy()
+        losses = (losses if losses.device.type == "cpu" else losses.cpu()).numpy()
         return losses[0] / size, losses[1] / -size
 
     def _next_step(self) -> None:
@@ -404,8 +403,8 @@ class LeanDDPG:
         exp_avg.lerp_(grad, 1.0 - beta1)
         exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1.0 - beta2)
         torch.sqrt(exp_avg_sq, out=denom)
-        torch.addcdiv(self._eps, denom, self._coefficients[0], out=denom)
-        params.addcmul_(torch.div(exp_avg, denom, out=denom), self._coefficients[1])
+        torch.addcdiv(self._eps, denom, self._bias_correction, out=denom)
+        params.addcmul_(torch.div(exp_avg, denom, out=denom), self._step_size)
 
     # -------------------------------------------------------------------------- acting
     def act(self, obs: torch.Tensor) -> torch.Tensor:
