@@ -6,7 +6,7 @@ tolerance against it): critic MSE towards ``r + gamma * not_done * Q'(s', mu'(s'
 loss ``-Q(s, mu(s))`` through the freshly updated critic without touching the critic's
 weights, Adam (``torch.optim.Adam``'s math, bias correction included), soft targets
 ``target <- (1 - tau) target + tau net``, per-agent losses summed so agent ``i``'s gradient
-is its own. What makes it lean (one update is ~80 tensor operations, no autograd graph):
+is its own. What makes it lean (one update is 82 tensor operations, no autograd graph):
 
 * **one flat buffer per network kind**: ``[2, k, P]`` holding the online and target
   parameters, so one batched matmul per layer evaluates both (the actor on ``s`` and the
