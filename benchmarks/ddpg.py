@@ -27,7 +27,7 @@ HP = DDPGConfig(warmup_steps=2000, min_steps=0, patience_steps=10**9)
 ENV = PendulumConfig(n_carts=2)
 TARGET_MS = {2000: 1.2, 256: 0.3}  # issue 12: one update, k = 1, one thread
 REPEATS = int(os.environ.get("BENCH_REPEATS", "5"))
-TRAINING_REPEATS = max(1, REPEATS // 2)
+TRAINING_REPEATS = max(1, (REPEATS + 1) // 2)
 LEAN_TRAINING, AUTOGRAD_TRAINING = "lonlib, lean update", "lonlib, autograd update"
 SB3_TRAINING = "Stable-Baselines3 DDPG"
 
@@ -154,21 +154,24 @@ def update_rows() -> list[dict]:
 
 
 def training_rows() -> list[dict]:
-    """Seconds per 2000 training env-steps (k = 1, batch 2000): lonlib lean, autograd, SB3."""
-    rows = []
-    measured = {}
-    for name, measure in (
-        (LEAN_TRAINING, lambda: lonlib_seconds_per_2000_training_steps("lean")),
-        (AUTOGRAD_TRAINING, lambda: lonlib_seconds_per_2000_training_steps("autograd")),
-        (SB3_TRAINING, sb3_seconds_per_2000_training_steps),
-    ):
-        values = [measure() for _ in range(TRAINING_REPEATS)]
-        if None in values:
+    """Seconds per 2000 training env-steps (k = 1, batch 2000): lonlib lean, autograd, SB3,
+    measured in turn within each repeat so all three see the same load."""
+    measures = {
+        LEAN_TRAINING: lambda: lonlib_seconds_per_2000_training_steps("lean"),
+        AUTOGRAD_TRAINING: lambda: lonlib_seconds_per_2000_training_steps("autograd"),
+        SB3_TRAINING: sb3_seconds_per_2000_training_steps,
+    }
+    values: dict[str, list] = {name: [] for name in measures}
+    for _ in range(TRAINING_REPEATS):
+        for name, measure in measures.items():
+            values[name].append(measure())
+    rows, sb3 = [], None
+    for name, seconds in values.items():
+        if None in seconds:
             rows.append({"training": f"{name}: not installed (pip install -e .[bench])"})
             continue
-        measured[name] = statistics.median(values)
-        rows.append({"training": name, "s per 2000 steps": measured[name]})
-    sb3 = measured.get(SB3_TRAINING)
+        rows.append({"training": name, "s per 2000 steps": statistics.median(seconds)})
+        sb3 = rows[-1]["s per 2000 steps"] if name == SB3_TRAINING else sb3
     for row in rows:
         if sb3 and "s per 2000 steps" in row:
             row["SB3 time / this"] = sb3 / row["s per 2000 steps"]
