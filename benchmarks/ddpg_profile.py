@@ -133,10 +133,11 @@ def kernel_costs(batch: int) -> dict[str, float]:
     }
 
 
-def floor_ms(batch: int, operators: int) -> dict[str, float]:
+def floor_ms(batch: int, operators: int, cost: dict[str, float]) -> dict[str, float]:
     """A lower bound on one lean update (k = 1) from its work and this machine's fastest
-    kernels: ``operators`` x overhead + each kind of work at its measured speed."""
-    work, cost = work_per_sample(), kernel_costs(batch)
+    kernels (:func:`kernel_costs`): ``operators`` x overhead + each kind of work at its
+    measured speed."""
+    work = work_per_sample()
     parts = {
         "operator overhead": operators * cost["operator overhead us"] / 1e3,
         "forward-shaped matmuls": work["forward-shaped MACs"] * cost["forward-shaped ns/MAC"],
@@ -163,9 +164,11 @@ def main() -> None:
     print(f"\n== lower bound of one lean update (k = 1); work per sample: {work}")
     for batch in (2000, 256):
         _, operators, _ = update_profile("lean", batch, 1)
-        parts = floor_ms(batch, operators)
+        cost = kernel_costs(batch)
+        parts = floor_ms(batch, operators, cost)
         detail = ", ".join(f"{name} {value:.3f}" for name, value in parts.items())
         print(f"batch {batch}: >= {sum(parts.values()):.3f} ms = {detail}")
+        print("  kernel costs: " + ", ".join(f"{name} {value:.3g}" for name, value in cost.items()))
     print("\n== local_search_batch, batch 256, 3000 steps (500 warm-up): cProfile seconds")
     for update in ("autograd", "lean"):
         for k in (1, 3):
