@@ -19,7 +19,7 @@ import torch
 
 from benchmarks.common import RESULTS, report
 from lonlib.ddpg import DDPGConfig, ReplayBuffer, local_search
-from lonlib.ddpg_update import make_learner
+from lonlib.ddpg_update import learner_class
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
 
@@ -37,8 +37,7 @@ def make_update(kind: str, k: int, batch: int) -> Callable[[], object]:
     sampled from a full replay buffer of random transitions (a tenth of them terminal)."""
     rng = np.random.default_rng(0)
     a_spec, c_spec = actor_spec(2), critic_spec(2)
-    learner = make_learner(
-        kind,
+    learner = learner_class(kind)(
         a_spec,
         c_spec,
         np.stack([a_spec.initial(rng) for _ in range(k)]),

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from lonlib.ddpg_update import LEARNERS, make_learner
+from lonlib.ddpg_update import LEARNERS, learner_class
 from lonlib.nets import actor_spec, critic_spec, forward_numpy
 from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
 from lonlib.validation import check_choice, check_field_types, check_range
@@ -174,8 +174,7 @@ def local_search_batch(
     rngs = [np.random.default_rng(seed) for seed in seeds]
     start_time = time.perf_counter()
 
-    learner = make_learner(
-        hp.update,
+    learner = learner_class(hp.update)(
         a_spec,
         c_spec,
         thetas,

@@ -64,32 +64,12 @@ class Learner(Protocol):
         ...
 
 
-def make_learner(
-    kind: str,
-    actor: NetSpec,
-    critic: NetSpec,
-    thetas: np.ndarray,
-    omegas: np.ndarray,
-    *,
-    learning_rate: float,
-    gamma: float,
-    tau: float,
-    device: str | torch.device = "cpu",
-) -> Learner:
-    """The ``"lean"`` (:class:`LeanDDPG`) or ``"autograd"`` learner for ``k`` agents."""
-    classes = {"lean": LeanDDPG, "autograd": AutogradDDPG}
-    if kind not in classes:
+def learner_class(kind: str) -> type[Learner]:
+    """The ``"lean"`` (:class:`LeanDDPG`) or ``"autograd"`` learner class; both take
+    ``(actor_spec, critic_spec, thetas, omegas, *, learning_rate, gamma, tau, device)``."""
+    if kind not in LEARNERS:
         raise ValueError(f"update must be one of {LEARNERS}, got {kind!r}")
-    return classes[kind](
-        actor,
-        critic,
-        thetas,
-        omegas,
-        learning_rate=learning_rate,
-        gamma=gamma,
-        tau=tau,
-        device=device,
-    )
+    return LeanDDPG if kind == "lean" else AutogradDDPG
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import torch
 
 from lonlib.ddpg import DDPGConfig, local_search_batch
 from lonlib.ddpg_autograd import AutogradDDPG
-from lonlib.ddpg_update import LeanDDPG, make_learner
+from lonlib.ddpg_update import LeanDDPG, learner_class
 from lonlib.nets import actor_spec, critic_spec, forward_numpy
 from lonlib.pendulum import PendulumConfig
 
@@ -113,7 +113,7 @@ def test_bad_shapes_and_kinds_are_refused():
     with pytest.raises(ValueError, match="critic sizes"):
         LeanDDPG(actor_spec(2), critic_spec(1), thetas, omegas, **HP)
     with pytest.raises(ValueError, match="update"):
-        make_learner("fast", actor_spec(2), critic_spec(2), thetas, omegas, **HP)
+        learner_class("fast")
     with pytest.raises(ValueError, match="agent"):
         LeanDDPG(actor_spec(2), critic_spec(2), thetas, omegas, **HP).reset_agent(2, *initial(2, 1))
 
