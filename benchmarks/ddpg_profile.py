@@ -1,10 +1,12 @@
 """Where one DDPG update and one training step spend their time (one torch thread).
 
 ``python -m benchmarks.ddpg_profile`` prints, for each update implementation, batch size and
-``k``, the self time of the torch operators grouped by kind (torch.profiler), then a cProfile
-of a short ``local_search_batch`` at batch 256 split by what a training step does. The
-committed summary is ``benchmarks/PROFILE.md``. Profilers add their own per-call overhead,
-so read the shares, not the absolute times (``python -m benchmarks`` measures those).
+``k``, the operators issued per update and the top operators' shares of self time
+(torch.profiler); a lower bound of the lean update from its work per sample and this
+machine's fastest kernels; then a cProfile of a short ``local_search_batch`` at batch 256
+split by the loop's direct callees. The committed summary is ``benchmarks/PROFILE.md``.
+Profilers add their own per-call overhead, so read the shares, not the absolute times
+(``python -m benchmarks`` measures those).
 """
 
 from __future__ import annotations
