@@ -2,7 +2,7 @@
 
 One call trains ``k`` independent agents in lockstep: each has its own environment, replay
 buffer, exploration noise, sampling stream and Adam state, and all ``k`` updates run as one
-batched matrix product per layer (:class:`lonlib.nets.BatchedMLP`). ``k = 1`` is the
+batched matrix product per layer (the learner, :mod:`lonlib.ddpg_update`). ``k = 1`` is the
 single-agent case of the same code. Read top to bottom, one environment step is:
 
 1. act: uniform random actions during the warm-up, then the Actor plus N(0, sigma) noise,
@@ -31,7 +31,6 @@ An agent that has stopped keeps riding along in the batched update until the las
 
 from __future__ import annotations
 
-import copy
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -40,9 +39,10 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from lonlib.nets import BatchedMLP, NetSpec, actor_spec, critic_spec, forward_numpy
+from lonlib.ddpg_update import LEARNERS, learner_class
+from lonlib.nets import NetSpec, actor_spec, critic_spec, forward_numpy
 from lonlib.pendulum import CoupledPendulums, PendulumConfig, StepResult, evaluate
-from lonlib.validation import check_field_types, check_range
+from lonlib.validation import check_choice, check_field_types, check_range
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,9 @@ class DDPGConfig:
     trial, so an optimum's fitness is a function of its parameters alone.
 
     ``device`` and ``threads`` say where the computation runs, not what it computes.
+
+    ``update``: ``"lean"`` (:class:`lonlib.ddpg_update.LeanDDPG`, hand-written passes, the
+    default) or ``"autograd"`` (:mod:`lonlib.ddpg_autograd`, the reference); same algorithm.
     """
 
     buffer_size: int = 40_000
@@ -80,6 +83,7 @@ class DDPGConfig:
     count_start: bool = False
     device: str = "cpu"
     threads: int = 1
+    update: str = "lean"
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -96,6 +100,7 @@ class DDPGConfig:
                 f"warmup_steps must be <= max_steps ({self.max_steps}) so that DDPG trains "
                 f"at least once, got {self.warmup_steps!r}"
             )
+        check_choice("update", self.update, LEARNERS)
         if self.min_steps > self.max_steps:
             raise ValueError(
                 f"min_steps must be <= max_steps ({self.max_steps}), got {self.min_steps!r}"
@@ -201,14 +206,16 @@ def local_search_batch(
     rngs = [np.random.default_rng(seed) for seed in seeds]
     start_time = time.perf_counter()
 
-    actor = BatchedMLP(a_spec, thetas).to(device)
-    critic = BatchedMLP(c_spec, omegas).to(device)
-    actor_target, critic_target = copy.deepcopy(actor), copy.deepcopy(critic)
-    for target in (actor_target, critic_target):
-        target.requires_grad_(False)
-    adam = {"lr": hp.learning_rate, "fused": device.type in ("cpu", "cuda")}
-    actor_opt = torch.optim.Adam(actor.parameters(), **adam)
-    critic_opt = torch.optim.Adam(critic.parameters(), **adam)
+    learner = learner_class(hp.update)(
+        a_spec,
+        c_spec,
+        thetas,
+        omegas,
+        learning_rate=hp.learning_rate,
+        gamma=hp.gamma,
+        tau=hp.tau,
+        device=device,
+    )
     replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, device)
 
     def greedy(flat_theta: np.ndarray) -> tuple[float, float]:
@@ -248,8 +255,7 @@ def local_search_batch(
         if step < hp.warmup_steps:
             actions = np.stack([rng.uniform(0.0, 1.0, n) for rng in rngs])
         else:
-            with torch.no_grad():
-                mu = actor(torch.as_tensor(obs, device=device)[:, None, :])[:, 0, :]
+            mu = learner.act(torch.as_tensor(obs, device=device))
             actions = exploration_actions(mu.cpu().numpy().astype(np.float64), rngs, hp.noise_std)
         # 2. step and store
         outcome = sim.step(actions)
@@ -260,16 +266,7 @@ def local_search_batch(
         # 3. update
         if step >= hp.warmup_steps:
             indices = np.stack([rng.integers(0, replay.size, hp.batch_size) for rng in rngs])
-            critic_loss, actor_loss = _update(
-                replay.sample(indices),
-                actor,
-                critic,
-                actor_target,
-                critic_target,
-                actor_opt,
-                critic_opt,
-                hp,
-            )
+            critic_loss, actor_loss = learner.update(replay.sample(indices))
             updates += 1
             for i in np.flatnonzero(active):
                 losses[i].append((critic_loss[i], actor_loss[i]))
@@ -277,8 +274,8 @@ def local_search_batch(
         ended = outcome.terminated | outcome.truncated
         if ended.any():
             candidate = hp.count_start or updates > 0
-            flat_actor = actor.flat()
-            flat_critic = critic.flat() if (ended & active).any() and candidate else None
+            flat_actor = learner.actor_flat()
+            flat_critic = learner.critic_flat() if (ended & active).any() and candidate else None
             for i in np.flatnonzero(ended & active):
                 score = greedy(flat_actor[i]) if candidate else (np.nan, np.nan)
                 if candidate and is_improvement(score, scores[i], hp.plateau_tiebreak):
@@ -312,7 +309,7 @@ def local_search_batch(
         stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)
         stop = active & (stale | (step >= hp.max_steps))
         if stop.any():
-            flat_actor, flat_critic = actor.flat(), critic.flat()
+            flat_actor, flat_critic = learner.actor_flat(), learner.critic_flat()
         for i in np.flatnonzero(stop):
             if scores[i] is no_candidate:  # no training episode ended: judge the Actor now
                 scores[i] = greedy(flat_actor[i])
@@ -426,39 +423,3 @@ class ReplayBuffer:
             batch[..., o + a + 1 : 2 * o + a + 1],
             batch[..., -1:],
         )
-
-
-def _update(
-    batch: tuple[torch.Tensor, ...],
-    actor: BatchedMLP,
-    critic: BatchedMLP,
-    actor_target: BatchedMLP,
-    critic_target: BatchedMLP,
-    actor_opt: torch.optim.Optimizer,
-    critic_opt: torch.optim.Optimizer,
-    hp: DDPGConfig,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One DDPG update of every agent; returns per-agent critic and actor losses."""
-    obs, actions, rewards, next_obs, not_done = batch
-    with torch.no_grad():
-        next_q = critic_target(torch.cat([next_obs, actor_target(next_obs)], dim=2))
-        target = rewards + hp.gamma * not_done * next_q
-    q = critic(torch.cat([obs, actions], dim=2))
-    # Per-agent mean losses, summed: each agent's gradient is exactly its own loss's.
-    critic_loss = ((q - target) ** 2).mean(dim=(1, 2))
-    critic_opt.zero_grad(set_to_none=True)
-    critic_loss.sum().backward()
-    critic_opt.step()
-
-    # The actor's loss needs the critic's input gradient only, not its weight gradients.
-    critic.requires_grad_(False)
-    actor_loss = -critic(torch.cat([obs, actor(obs)], dim=2)).mean(dim=(1, 2))
-    actor_opt.zero_grad(set_to_none=True)
-    actor_loss.sum().backward()
-    actor_opt.step()
-    critic.requires_grad_(True)
-
-    with torch.no_grad():
-        for net, target_net in ((actor, actor_target), (critic, critic_target)):
-            torch._foreach_lerp_(target_net.tensors, net.tensors, hp.tau)
-    return critic_loss.detach().cpu().numpy(), actor_loss.detach().cpu().numpy()

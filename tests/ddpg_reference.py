@@ -1,15 +1,14 @@
 """A textbook single-agent DDPG update (CleanRL's, written out with plain torch tensors) and
-an adapter that runs lonlib's batched update on flat parameters, for the update tests."""
+an adapter that runs lonlib's batched learner on flat parameters, for the update tests."""
 
 from __future__ import annotations
-
-import copy
 
 import numpy as np
 import torch
 
-from lonlib.ddpg import DDPGConfig, _update
-from lonlib.nets import BatchedMLP, NetSpec
+from lonlib.ddpg import DDPGConfig
+from lonlib.ddpg_update import learner_class
+from lonlib.nets import NetSpec
 
 
 def _mlp(spec: NetSpec, params: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:
@@ -72,24 +71,26 @@ def reference_updates(a_spec, c_spec, theta, omega, batches, hp: DDPGConfig) -> 
 
 
 def lonlib_updates(a_spec, c_spec, thetas, omegas, batches, hp: DDPGConfig) -> dict:
-    """k agents (flat ``[k, P]`` parameters) through lonlib's batched update; ``batches``
-    hold ``[k, B, ...]`` arrays ``(s, a, r, s', not_done)``."""
-    actor, critic = BatchedMLP(a_spec, thetas), BatchedMLP(c_spec, omegas)
-    actor_t, critic_t = copy.deepcopy(actor), copy.deepcopy(critic)
-    for target in (actor_t, critic_t):
-        target.requires_grad_(False)
-    actor_opt = torch.optim.Adam(actor.parameters(), lr=hp.learning_rate, fused=True)
-    critic_opt = torch.optim.Adam(critic.parameters(), lr=hp.learning_rate, fused=True)
+    """k agents (flat ``[k, P]`` parameters) through lonlib's learner ``hp.update`` (the lean
+    one by default); ``batches`` hold ``[k, B, ...]`` arrays ``(s, a, r, s', not_done)``."""
+    learner = learner_class(hp.update)(
+        a_spec,
+        c_spec,
+        thetas,
+        omegas,
+        learning_rate=hp.learning_rate,
+        gamma=hp.gamma,
+        tau=hp.tau,
+    )
     losses = []
     for batch in batches:
         tensors = tuple(torch.as_tensor(np.asarray(x, dtype=np.float32)) for x in batch)
-        losses.append(_update(tensors, actor, critic, actor_t, critic_t, actor_opt, critic_opt, hp))
+        losses.append(learner.update(tensors))
+    state = learner.state()
     return {
-        "theta": actor.flat(),
-        "omega": critic.flat(),
-        "theta_target": actor_t.flat(),
-        "omega_target": critic_t.flat(),
+        "theta": state["actor"],
+        "omega": state["critic"],
+        "theta_target": state["actor_target"],
+        "omega_target": state["critic_target"],
         "losses": np.array(losses).transpose(2, 0, 1),  # [k, updates, (critic, actor)]
-        "critic": critic,
-        "actor": actor,
     }

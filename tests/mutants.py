@@ -35,50 +35,74 @@ class Mutant:
 
 
 DDPG, BH, SIM = "lonlib/ddpg.py", "lonlib/basin_hopping.py", "lonlib/pendulum.py"
+LEAN, AUTOGRAD = "lonlib/ddpg_update.py", "lonlib/ddpg_autograd.py"
 GUARDS = {
     DDPG: ["tests/test_ddpg.py"],
+    LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
+    AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
     SIM: ["tests/test_pendulum.py"],
 }
 
 MUTANTS = [
-    # --- DDPG: the update
-    Mutant(DDPG, "actor_loss = -critic(", "actor_loss = critic(", "actor descends Q"),
+    # --- DDPG: the lean update (the default learner)
     Mutant(
-        DDPG,
-        "torch._foreach_lerp_(target_net.tensors, net.tensors, hp.tau)",
-        "torch._foreach_lerp_(target_net.tensors, net.tensors, 0.0)",
-        "no soft target update",
+        LEAN,
+        "torch.mul(row, -1.0 / size, out=self._row)",
+        "torch.mul(row, 1.0 / size, out=self._row)",
+        "actor descends Q",
     ),
     Mutant(
-        DDPG,
-        "torch._foreach_lerp_(target_net.tensors, net.tensors, hp.tau)",
-        "torch._foreach_lerp_(target_net.tensors, net.tensors, 1.0 - hp.tau)",
-        "tau and 1 - tau swapped",
+        LEAN,
+        "self.actor_params[0].lerp_(self.actor_params[1], self.tau)",
+        "self.actor_params[0].lerp_(self.actor_params[1], 0.0)",
+        "no soft target update of the Actor",
     ),
     Mutant(
-        DDPG,
-        "target = rewards + hp.gamma * not_done * next_q",
-        "target = rewards + hp.gamma * next_q",
+        LEAN,
+        "self.critic_params[1].lerp_(self.critic_params[0], self.tau)",
+        "self.critic_params[1].lerp_(self.critic_params[0], 1.0 - self.tau)",
+        "tau and 1 - tau swapped in the Critic's target",
+    ),
+    Mutant(
+        LEAN,
+        "torch.addcmul(rewards, not_done, self._q_next, value=self.gamma, out=self._target)",
+        "torch.addcmul(rewards, torch.ones_like(not_done), self._q_next, value=self.gamma,"
+        " out=self._target)",
         "bootstraps past a termination",
     ),
     Mutant(
-        DDPG,
-        "target = rewards + hp.gamma * not_done * next_q",
-        "target = rewards + not_done * next_q",
+        LEAN,
+        "torch.addcmul(rewards, not_done, self._q_next, value=self.gamma, out=self._target)",
+        "torch.addcmul(rewards, not_done, self._q_next, value=1.0, out=self._target)",
         "gamma ignored",
     ),
+    Mutant(LEAN, "dq.mul_(2.0 / size)", "dq.mul_(1.0 / size)", "critic gradient halved"),
     Mutant(
-        DDPG,
-        "next_q = critic_target(torch.cat([next_obs, actor_target(next_obs)], dim=2))",
-        "next_q = critic(torch.cat([next_obs, actor(next_obs)], dim=2))",
-        "online nets instead of targets in the critic target",
+        LEAN,
+        "exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1.0 - beta2)",
+        "exp_avg_sq.mul_(beta2).addcmul_(grad, grad, value=1.0)",
+        "Adam's second moment",
+    ),
+    # --- DDPG: the autograd reference update (update="autograd")
+    Mutant(AUTOGRAD, "actor_loss = -critic(", "actor_loss = critic(", "autograd: actor descends Q"),
+    Mutant(
+        AUTOGRAD,
+        "torch._foreach_lerp_(target_net.tensors, net.tensors, tau)",
+        "torch._foreach_lerp_(target_net.tensors, net.tensors, 0.0)",
+        "autograd: no soft target update",
     ),
     Mutant(
-        DDPG,
+        AUTOGRAD,
+        "target = rewards + gamma * not_done * next_q",
+        "target = rewards + gamma * next_q",
+        "autograd: bootstraps past a termination",
+    ),
+    Mutant(
+        AUTOGRAD,
         "critic_loss = ((q - target) ** 2).mean(dim=(1, 2))",
         "critic_loss = (q - target).abs().mean(dim=(1, 2))",
-        "critic loss is not the squared error",
+        "autograd: critic loss is not the squared error",
     ),
     # --- DDPG: replay and exploration
     Mutant(
@@ -211,8 +235,8 @@ MUTANTS = [
     ),
     Mutant(
         SIM,
-        "temp = (-push - m * l * phi_dot**2 * sin + friction) / total",
-        "temp = (-push + m * l * phi_dot**2 * sin + friction) / total",
+        "temp = (-drive - m * l * phi_dot**2 * sin + friction) / total",
+        "temp = (-drive + m * l * phi_dot**2 * sin + friction) / total",
         "centripetal term sign",
     ),
     Mutant(
@@ -241,14 +265,14 @@ MUTANTS = [
     ),
     Mutant(
         SIM,
-        "x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total",
-        "x_ddot = (push + m * l * (phi_dot**2 * sin + phi_ddot * cos) - friction) / total",
+        "x_ddot = (drive + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total",
+        "x_ddot = (drive + m * l * (phi_dot**2 * sin + phi_ddot * cos) - friction) / total",
         "rod-to-cart reaction sign",
     ),
     Mutant(
         SIM,
-        "x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total",
-        "x_ddot = (push + m * l * (phi_dot**2 * sin - phi_ddot * cos) + friction) / total",
+        "x_ddot = (drive + m * l * (phi_dot**2 * sin - phi_ddot * cos) - friction) / total",
+        "x_ddot = (drive + m * l * (phi_dot**2 * sin - phi_ddot * cos) + friction) / total",
         "friction on the cart pushes",
     ),
     Mutant(
@@ -265,11 +289,23 @@ MUTANTS = [
     ),
     Mutant(
         SIM,
-        "push = -cfg.motor_gain * motor_command(actions)",
-        "push = cfg.motor_gain * motor_command(actions)",
+        "drive = -cfg.motor_gain * motor_command(actions)",
+        "drive = cfg.motor_gain * motor_command(actions)",
         "motor direction",
     ),
     Mutant(SIM, "h = cfg.dt / cfg.substeps", "h = cfg.dt", "substeps ignored"),
+    Mutant(
+        SIM,
+        "else (drive - x_dot) / cfg.motor_tau",
+        "else (drive - x_dot) / (2 * cfg.motor_tau)",
+        "velocity motor: lag",
+    ),
+    Mutant(
+        SIM,
+        "else (drive - x_dot) / cfg.motor_tau",
+        "else (x_dot - drive) / cfg.motor_tau",
+        "velocity motor: sign",
+    ),
     Mutant(
         SIM,
         "                x_dot, phi_dot = x_dot + h * x_ddot, phi_dot + h * phi_ddot\n"
@@ -287,8 +323,8 @@ MUTANTS = [
     Mutant(SIM, "upright *= running", "upright *= 1.0", "ended episodes keep scoring"),
     Mutant(
         SIM,
-        "reward = 0.5 * (1.0 + cos).mean(axis=1) + cfg.termination_penalty * terminated",
-        "reward = 0.5 * (1.0 + cos).mean(axis=1) + cfg.termination_penalty * truncated",
+        "reward = height.mean(axis=1) + cfg.termination_penalty * terminated",
+        "reward = height.mean(axis=1) + cfg.termination_penalty * truncated",
         "penalty on truncation",
     ),
     Mutant(
