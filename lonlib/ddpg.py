@@ -206,16 +206,7 @@ def local_search_batch(
     rngs = [np.random.default_rng(seed) for seed in seeds]
     start_time = time.perf_counter()
 
-    learner = learner_class(hp.update)(
-        a_spec,
-        c_spec,
-        thetas,
-        omegas,
-        learning_rate=hp.learning_rate,
-        gamma=hp.gamma,
-        tau=hp.tau,
-        device=device,
-    )
+    learner = make_learner(a_spec, c_spec, thetas, omegas, hp)
     replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, device)
 
     def greedy(flat_theta: np.ndarray) -> tuple[float, float]:
@@ -327,6 +318,23 @@ def local_search_batch(
             bar.set_postfix(best=f"{max(r.fitness for r in results):.3f}", active=int(active.sum()))
     bar.close()
     return results
+
+
+def make_learner(
+    a_spec: NetSpec, c_spec: NetSpec, thetas: np.ndarray, omegas: np.ndarray, hp: DDPGConfig
+):
+    """The learner ``hp.update`` names for ``k`` agents starting from ``thetas``, ``omegas``
+    (targets copied from them, Adam state empty) on ``hp.device``."""
+    return learner_class(hp.update)(
+        a_spec,
+        c_spec,
+        thetas,
+        omegas,
+        learning_rate=hp.learning_rate,
+        gamma=hp.gamma,
+        tau=hp.tau,
+        device=torch.device(hp.device),
+    )
 
 
 def exploration_actions(

@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lonlib.ddpg import DDPGConfig
-from lonlib.ddpg_update import learner_class
+from lonlib.ddpg import DDPGConfig, make_learner
 from lonlib.nets import NetSpec
 
 
@@ -73,15 +72,7 @@ def reference_updates(a_spec, c_spec, theta, omega, batches, hp: DDPGConfig) -> 
 def lonlib_updates(a_spec, c_spec, thetas, omegas, batches, hp: DDPGConfig) -> dict:
     """k agents (flat ``[k, P]`` parameters) through lonlib's learner ``hp.update`` (the lean
     one by default); ``batches`` hold ``[k, B, ...]`` arrays ``(s, a, r, s', not_done)``."""
-    learner = learner_class(hp.update)(
-        a_spec,
-        c_spec,
-        thetas,
-        omegas,
-        learning_rate=hp.learning_rate,
-        gamma=hp.gamma,
-        tau=hp.tau,
-    )
+    learner = make_learner(a_spec, c_spec, thetas, omegas, hp)
     losses = []
     for batch in batches:
         tensors = tuple(torch.as_tensor(np.asarray(x, dtype=np.float32)) for x in batch)
