@@ -171,7 +171,7 @@ def behaviour_hover(trials: pd.DataFrame) -> dict[str, str]:
 def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e-9) -> pd.DataFrame:
     """The best optimum of each p, per detected sink-fitness peak the sink nearest it, and
     the best optimum of each behaviour label (one row per distinct optimum: p, run, index,
-    fitness, role; the role names the label)."""
+    fitness, role, behaviour). Recordings' file names carry the role and the behaviour."""
     rows: dict[str, dict] = {}
     for _, group in trials.groupby("p", sort=True):
         graph = build_lon(group, "max", tolerance)
@@ -202,6 +202,7 @@ def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e
                     "index": data["index"],
                     "fitness": data["fitness"],
                     "role": role,
+                    "behaviour": data.get("label", ""),
                 },
             )
     return pd.DataFrame(list(rows.values()))
@@ -215,7 +216,9 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
     paths = []
     for row in selection.itertuples():
         optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
-        name = recording_name(row.p, int(row.run), row.fitness, label=row.role)
+        behaviour = slug(row.behaviour) if row.behaviour else ""
+        role = row.role if behaviour in row.role else f"{row.role}_{behaviour}".strip("_")
+        name = recording_name(row.p, int(row.run), row.fitness, label=role)
         path = folder / "recordings" / name
         record(optimum.theta, config.env, path, title=f"{row.role} p={p_label(row.p)}")
         paths.append(path)

@@ -78,3 +78,26 @@ def test_sensitivity_has_a_panel_per_metric():
     )
     fig = sensitivity(metrics)
     assert len(fig.axes) == 6 and fig.axes[0].get_xscale() == "log"
+
+
+def test_figures_colour_and_stack_by_behaviour_label():
+    from lonlib.analysis import optima_to_record
+    from lonlib.plots import label_colour, lon_3d_interactive
+    from tests.test_behaviour import labelled_trials
+
+    table = labelled_trials()
+    graph = build_lon(table)
+    fig = lon_3d_interactive(graph, hover={"p0.0001_r0_t3": "rod 0: up 90%"})
+    markers = [t for t in fig.data if t.type == "scatter3d" and t.mode == "markers"]
+    shown = {t.name.split(" (")[0] for t in markers}
+    assert {"balancing", "spinning", "swinging high"} <= shown
+    balancing = next(t for t in markers if t.name.startswith("balancing"))
+    assert balancing.marker.color == label_colour("balancing")
+    assert "behaviour: balancing" in balancing.text[0] and "rod 0: up 90%" in balancing.text[0]
+    accepted = table[table["accepted"]]
+    hist = fitness_histogram(accepted["fitness"].to_numpy(), "t", labels=accepted["label"])
+    legend = [t.get_text() for t in hist.axes[0].get_legend().get_texts()]
+    assert legend[:4] == ["balancing", "spinning (in phase)", "spinning", "swinging high"]
+    chosen = optima_to_record(table)
+    assert set(chosen["behaviour"]) == set(accepted["label"])  # the best of every label
+    assert {"best", "best-spinning", "best-swinging-high"} <= set(chosen["role"])
