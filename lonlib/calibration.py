@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import io
 import math
 import multiprocessing
 import time
@@ -482,11 +483,9 @@ def run_and_store_cell(out: str | Path, cell: Cell, config: CalibrationConfig) -
     record, thetas = run_cell(cell, config)
     record_path, actors_path = cell_paths(Path(out), cell)
 
-    def write_npz(tmp: Path) -> None:
-        with open(tmp, "wb") as stream:
-            np.savez_compressed(stream, theta=thetas.astype(np.float32))
-
-    atomic_write(actors_path, write_npz)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, theta=thetas.astype(np.float32))
+    atomic_write(actors_path, buffer.getvalue())
     write_json(record_path, record)
     return cell.name
 
@@ -669,9 +668,11 @@ def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResu
     figure = calibration_figure(records, searches)
     files = [out / name for name in ("calibration.csv", "searches.csv", "drift.csv")]
     for table, path in zip((cells, searches, drift), files, strict=True):
-        atomic_write(path, lambda tmp, table=table: table.to_csv(tmp, index=False))
+        atomic_write(path, table.to_csv(index=False).encode())
     png = out / "calibration.png"
-    atomic_write(png, lambda tmp: figure.savefig(tmp, dpi=120, format="png"))
+    image = io.BytesIO()
+    figure.savefig(image, dpi=120, format="png")
+    atomic_write(png, image.getvalue())
     return CalibrationResult(cells, searches, drift, figure, [*files, png])
 
 

@@ -238,10 +238,18 @@ def test_yaml_grid_and_validation(tmp_path):
 
 
 def test_notebook_runs_the_tiny_grid(tmp_path):
-    from tests.test_notebooks import execute
+    import papermill as pm
+
+    from tests.test_notebooks import REPO
 
     out = tmp_path / "study"
-    execute("calibrate_physics", tmp_path, grid="tiny", max_steps=120, workers=1, out=str(out))
+    pm.execute_notebook(
+        str(REPO / "notebooks" / "calibrate_physics.ipynb"),
+        str(tmp_path / "calibrate_physics.ipynb"),
+        parameters={"grid": "tiny", "max_steps": 120, "workers": 1, "out": str(out)},
+        progress_bar=False,
+        cwd=str(REPO),
+    )
     cells = pd.read_csv(out / "calibration.csv")
     assert len(cells) == 2 and (cells["searches"] == 2).all()
     assert (out / "calibration.png").stat().st_size > 0
