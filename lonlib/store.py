@@ -263,6 +263,12 @@ def read_trials(path: Path) -> pd.DataFrame:
     except Exception as error:  # pyarrow raises several types for a damaged file
         raise CorruptDataError(f"{path}: cannot read the trials table ({error})") from error
     missing = set(TRIAL_COLUMNS) - set(table.columns)
+    if missing and missing <= {"start_fitness", "improved", "stop_reason"}:
+        raise CorruptDataError(
+            f"{path}: written by an older lonlib, before trials recorded {sorted(missing)} "
+            "(and before only trained policies could be accepted); analyse it with that "
+            "version, or sample the experiment again into a new folder"
+        )
     if missing:
         raise CorruptDataError(f"{path}: trials table lacks columns {sorted(missing)}")
     if list(table["index"]) != list(range(len(table))):

@@ -223,3 +223,13 @@ def test_a_killed_pool_worker_is_retried_and_its_run_resumes(tmp_path):
     assert killed is not None, "no worker to kill"
     assert "error" not in outcome, outcome.get("error")
     pd.testing.assert_frame_equal(outcome["trials"][COMPARED], expected[COMPARED])
+
+
+def test_a_trials_table_from_an_older_lonlib_is_named_as_such(tmp_path):
+    from lonlib.store import read_trials
+
+    old = tmp_path / "trials.parquet"
+    columns = ["p", "run", "index", "parent", "fitness", "accepted", "seconds", "env_steps"]
+    pd.DataFrame([[1e-4, 0, 0, -1, 0.0, True, 1.0, 10]], columns=columns).to_parquet(old)
+    with pytest.raises(CorruptDataError, match="older lonlib"):
+        read_trials(old)
