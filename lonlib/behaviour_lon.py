@@ -1,9 +1,10 @@
 """The behavioural LON: optima with the same behaviour and equal fitness as one node.
 
 A neutral-network view of "same behaviour, different weights" (README, "Behaviours"):
-accepted optima with the same label (:mod:`lonlib.behaviour`) whose fitness values are equal
-within the LON's tolerance (chained: sorted values closer than the tolerance to their
-neighbour join) become one node, and so do rejected optima among themselves. A transition
+accepted optima of one p with the same label (:mod:`lonlib.behaviour`) whose fitness values
+are equal within the LON's tolerance (chained: sorted values closer than the tolerance to
+their neighbour join, as the CMLON's contraction chains equal edges) become one node, and so
+do rejected optima among themselves; optima without a label are never merged. A transition
 between two members of one node becomes a self-return of that node; transitions between
 nodes are summed. The result is a LON graph like :func:`lonlib.lon.build_lon`'s, so every
 metric of :mod:`lonlib.lon_metrics`, the MLON and the CMLON apply to it unchanged.
@@ -26,12 +27,16 @@ def behaviour_groups(graph: nx.DiGraph) -> pd.Series:
         {
             "name": arrays.names,
             "label": [graph.nodes[n].get("label", "") or "unlabelled" for n in arrays.names],
+            "p": [graph.nodes[n].get("p", 0.0) for n in arrays.names],
             "fitness": arrays.fitness,
             "accepted": arrays.accepted,
         }
-    ).sort_values(["accepted", "label", "fitness"], kind="stable")
-    same_kind = (table["accepted"] == table["accepted"].shift()) & (
-        table["label"] == table["label"].shift()
+    ).sort_values(["p", "accepted", "label", "fitness"], kind="stable")
+    same_kind = (
+        (table["accepted"] == table["accepted"].shift())
+        & (table["label"] == table["label"].shift())
+        & (table["p"] == table["p"].shift())
+        & (table["label"] != "unlabelled")  # optima without a descriptor are never merged
     )
     close = table["fitness"].diff().abs() <= arrays.tolerance
     group = (~(same_kind & close)).cumsum()
@@ -103,7 +108,7 @@ def behaviour_table(trials: pd.DataFrame, tolerance: float = 1e-9) -> pd.DataFra
     for p, group in trials.groupby("p", sort=True):
         graph = build_lon(group, sense="max", tolerance=tolerance)
         sink_set = set(sinks(graph))
-        accepted = group[group["accepted"].astype(bool)]
+        accepted = group[group["accepted"].astype(bool)].fillna({"label": "unlabelled"})
         names = [node_id(p, r, i) for r, i in zip(accepted["run"], accepted["index"], strict=True)]
         is_sink = pd.Series([name in sink_set for name in names], index=accepted.index)
         for label, members in accepted.groupby("label", sort=False):

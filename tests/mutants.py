@@ -176,6 +176,38 @@ MUTANTS = [
         "if step > hp.warmup_steps:\n            indices",
         "one update fewer",
     ),
+    Mutant(
+        DDPG,
+        "                    last_improvement[i] = step\n",
+        "",
+        "patience never reset by an improvement",
+    ),
+    Mutant(
+        DDPG,
+        "last_improvement = np.full(k, hp.warmup_steps, dtype=np.int64)",
+        "last_improvement = np.zeros(k, dtype=np.int64)",
+        "patience window opens at step 0",
+    ),
+    Mutant(
+        DDPG,
+        "stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)",
+        "stale = step - last_improvement >= hp.patience_steps",
+        "min_steps ignored",
+    ),
+    Mutant(
+        DDPG,
+        "stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)",
+        "stale = (step >= hp.min_steps) & (step - last_improvement > hp.patience_steps)",
+        "patience off by one",
+    ),
+    Mutant(
+        DDPG,
+        "                results[i].omega = flat_critic[i].copy()\n"
+        "                results[i].final_evaluation = True",
+        "                results[i].omega = omegas[i].copy()\n"
+        "                results[i].final_evaluation = True",
+        "final evaluation returns the start Critic",
+    ),
     # --- Algorithm 2
     Mutant(
         BH,
@@ -220,6 +252,7 @@ MUTANTS = [
         "perturbation shares DDPG's stream",
     ),
     Mutant(BH, "parent = state.incumbent_index", "parent = index - 1", "wrong parent"),
+    Mutant(BH, "improved=optimum.improved,", "improved=True,", "every trial marked improved"),
     Mutant(
         BH,
         "return bool(self.fitness > self.start_fitness)",

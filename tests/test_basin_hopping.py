@@ -64,8 +64,12 @@ def test_trials_record_the_start_fitness_improvement_and_stop_reason():
     state = basin_hopping(search, START, BasinHoppingConfig(tolerance=1), run_seed=0)
     trial = state.trials[0]
     assert (trial.start_fitness, trial.improved, trial.stop_reason) == (0.25, True, "patience")
-    unimproved = LocalOptimum(0.25, START[0], START[1], start_fitness=0.25)
-    assert not unimproved.improved
+
+    def no_better(theta, omega, seed):
+        return LocalOptimum(0.25, theta, omega, 7, start_fitness=0.25, stop_reason="budget")
+
+    state = basin_hopping(no_better, START, BasinHoppingConfig(tolerance=1), run_seed=0)
+    assert state.trials[0].improved is False and state.trials[0].start_fitness == 0.25
 
 
 def test_perturbation_and_local_search_draw_from_independent_streams():

@@ -97,6 +97,16 @@ def descriptor(**changes):
         ({"end_reason": "BOUNDARY", "end_step": 400}, "stops at boundary"),
         ({"end_reason": "COLLISION", "end_step": 90}, "crash"),
         ({"end_reason": "TETHER", "end_step": 1900}, "spinning (in phase)"),  # late: not a crash
+        (  # balanced, then collided: named by what it achieved
+            {
+                "upright_share": (0.9, 0.9),
+                "turns": (0.5, 0.5),
+                "upright_speed": (0.1, 0.1),
+                "end_reason": "COLLISION",
+                "end_step": 1700,
+            },
+            "balancing",
+        ),
     ],
 )
 def test_label_rules(changes, expected):
@@ -124,6 +134,22 @@ def test_descriptor_columns_round_trip_and_relabel_from_a_table():
         "spinning (independent)",
         None,
     ]
+
+
+def test_robust_starts_perturb_the_nominal_start_and_bad_parameters_are_refused():
+    # With the environment's own start noise, the perturbed starts sit around the nominal
+    # (noisy) start: with zero extra noise they reproduce its fitness up to rounding (the
+    # spinning rod is chaotic). Had they ignored it, the rod would start exactly upright and
+    # at rest, and stay there: robustness 1.
+    config = PendulumConfig(n_carts=1, steps=200, initial_noise=0.3, initial_angle=0.0)
+    d = describe(zero_controller(config), config, eval_seed=3, robustness_noise=0.0)
+    assert d.fitness < 0.9 and d.robust_mean == pytest.approx(d.fitness, abs=0.02)
+    theta = actor_spec(1).initial(np.random.default_rng(0))
+    theta[3] = np.nan
+    with pytest.raises(ValueError, match="theta"):
+        describe(theta, config)
+    with pytest.raises(ValueError, match="theta"):
+        describe(theta[:10], config)
 
 
 def test_an_actor_is_described_by_its_flat_parameters():

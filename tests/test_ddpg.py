@@ -209,6 +209,7 @@ def test_a_search_with_no_finished_training_episode_returns_the_trained_actor():
     assert result.final_evaluation and result.updates == 81
     assert result.history == [] or all(h.env_steps < 100 for h in result.history)
     assert not np.array_equal(result.theta, theta)
+    assert not np.array_equal(result.omega, omega)
     assert greedy_score(actor_spec(1), result.theta, env, hp.eval_seed)[0] == result.fitness
 
 
@@ -250,13 +251,32 @@ def test_same_seed_same_result_and_history_is_complete():
     assert all(np.isnan(h.greedy_fitness) for h in a.history if h.env_steps < 100)
 
 
-def test_patience_stops_a_search_that_does_not_improve():
+@pytest.mark.parametrize(
+    ("patience", "min_steps", "tiebreak"),
+    [(200, 0, False), (50, 0, False), (50, 1000, False), (300, 0, True)],
+)
+def test_patience_stops_exactly_patience_steps_after_the_last_improvement(
+    patience, min_steps, tiebreak
+):
+    # The window opens at the first update (end of the warm-up); never before min_steps.
     env = PendulumConfig(n_carts=1, steps=50)
-    hp = DDPGConfig(max_steps=5000, patience_steps=200, plateau_tiebreak=False, **SMALL)
+    hp = DDPGConfig(
+        max_steps=5000,
+        patience_steps=patience,
+        plateau_tiebreak=tiebreak,
+        **{**SMALL, "min_steps": min_steps},
+    )
     theta, omega = initial(1, 1)
     result = local_search(theta[0], omega[0], env, hp, seed=0)
+    last, best = hp.warmup_steps, (-np.inf, -np.inf)
+    for record in result.history:
+        score = (record.greedy_fitness, record.greedy_return)
+        if record.env_steps >= hp.warmup_steps and is_improvement(score, best, tiebreak):
+            last, best = record.env_steps, score
+    if tiebreak:  # the test must see an improvement after the first candidate
+        assert last > hp.warmup_steps + 2 * env.steps
     assert result.stop_reason == "patience"
-    assert result.env_steps < 5000
+    assert result.env_steps == max(min_steps, last + patience)
 
 
 def test_plateau_tiebreak_counts_return_progress_only_on_equal_fitness():
