@@ -19,7 +19,7 @@ import pandas as pd
 from lonlib.behaviour import descriptors_of
 from lonlib.behaviour_lon import behaviour_table, behavioural_lon
 from lonlib.experiment import ExperimentConfig
-from lonlib.lon import build_lon, sinks
+from lonlib.lon import build_lon, node_id, sinks
 from lonlib.lon_metrics import lon_metrics
 from lonlib.peaks import compare_with_paper, detect_peaks
 from lonlib.plots import (
@@ -150,8 +150,6 @@ def slug(text: str) -> str:
 
 def behaviour_hover(trials: pd.DataFrame) -> dict[str, str]:
     """Node -> hover text with the main descriptor values of its stored behaviour."""
-    from lonlib.lon import node_id
-
     out = {}
     for row, d in zip(trials.itertuples(), descriptors_of(trials), strict=True):
         if d is None:

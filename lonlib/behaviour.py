@@ -148,6 +148,7 @@ def describe(
     policy = as_policy(theta_or_policy, config)
     n = config.n_carts
     sim = CoupledPendulums(config, 1, eval_seed)
+    start = np.stack([sim.x, sim.x_dot, sim.phi, sim.phi_dot])  # nominal start, [4, 1, n]
     phis, phi_dots, xs, x_dots = [], [], [], []
     while not sim.done[0]:
         sim.step(policy(sim.observe()))
@@ -168,8 +169,6 @@ def describe(
     )
     phase = float(np.mean(np.cos(phi[:, :-1] - phi[:, 1:]))) if n > 1 else float("nan")
 
-    nominal = CoupledPendulums(config, 1, eval_seed)  # the nominal start state, again
-    start = np.stack([nominal.x, nominal.x_dot, nominal.phi, nominal.phi_dot])  # [4, 1, n]
     robust = _robustness(
         policy, config, start, robustness_starts, robustness_noise, robustness_seed
     )

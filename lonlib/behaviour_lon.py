@@ -16,7 +16,7 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 
-from lonlib.lon import Transitions, _assemble, graph_arrays
+from lonlib.lon import Transitions, _assemble, build_lon, graph_arrays, node_id, sinks
 
 
 def behaviour_groups(graph: nx.DiGraph) -> pd.Series:
@@ -100,8 +100,6 @@ def behaviour_table(trials: pd.DataFrame, tolerance: float = 1e-9) -> pd.DataFra
     """The "typical behaviours" table: per p and label, the accepted optima, the sinks
     (ends of monotonic sequences, on the MLON), their fitness range and the label's share
     of all sinks at that p. Rows are sorted by p, then by best fitness (descending)."""
-    from lonlib.lon import build_lon, node_id, sinks
-
     if "label" not in trials:
         raise ValueError("trials carry no behaviour labels (no 'label' column)")
     rows = []
