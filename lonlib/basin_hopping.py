@@ -137,38 +137,68 @@ def trial_seeds(run_seed: int, index: int) -> TrialSeeds:
     )
 
 
-def basin_hopping_steps(
-    local_search: LocalSearch,
-    initial: tuple[np.ndarray, np.ndarray],
-    config: BasinHoppingConfig,
-    run_seed: int,
-    state: RunState | None = None,
-) -> Iterator[tuple[RunState, Trial, LocalOptimum]]:
-    """Run Algorithm 2 one local search at a time, yielding after each.
+@dataclass(frozen=True)
+class SearchRequest:
+    """The next local search a run asks for: trial ``index`` from ``theta``/``omega``
+    (perturbed from incumbent ``parent``, -1 for the random start) with DDPG seed ``seed``."""
 
-    ``initial`` holds the random starting Actor and Critic. The perturbation of trial ``i``
-    and the local search's seed are independent streams derived only from ``(run_seed, i)``,
-    so a run resumed from a stored ``state`` continues exactly as an uninterrupted one would.
-    The caller stores each yielded trial before asking for the next.
+    index: int
+    parent: int
+    theta: np.ndarray
+    omega: np.ndarray
+    seed: int
+
+
+class BasinHoppingRun:
+    """Algorithm 2 for one run, one local search at a time, with the local search run by
+    the caller: :meth:`next_search` says what to search, :meth:`record` takes the optimum.
+
+    The perturbation of trial ``i`` and the local search's seed are independent streams
+    derived only from ``(run_seed, i)`` (:func:`trial_seeds`), so a run resumed from a stored
+    ``state``, or driven by any executor, continues exactly as an uninterrupted one would.
     """
-    state = state or RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
-    while not state.finished:
+
+    def __init__(
+        self,
+        initial: tuple[np.ndarray, np.ndarray],
+        config: BasinHoppingConfig,
+        run_seed: int,
+        state: RunState | None = None,
+    ) -> None:
+        self.initial, self.config, self.run_seed = initial, config, run_seed
+        self.state = state or RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
+
+    @property
+    def finished(self) -> bool:
+        """True once the run has met its tolerance or its budget."""
+        return self.state.finished
+
+    def next_search(self) -> SearchRequest:
+        """The next trial's start parameters and seed: the random start first, then the
+        incumbent plus U[-p, p] on every Actor and Critic parameter."""
+        if self.finished:
+            raise RuntimeError("the run has ended; it asks for no more local searches")
+        state = self.state
         index = len(state.trials)
-        seeds = trial_seeds(run_seed, index)
+        seeds = trial_seeds(self.run_seed, index)
         if state.incumbent is None:
-            theta, omega, parent = initial[0], initial[1], -1
+            theta, omega, parent = self.initial[0], self.initial[1], -1
         else:
             rng = np.random.default_rng(seeds.perturbation)
-            theta = perturb(state.incumbent.theta, config.perturbation, rng)
-            omega = perturb(state.incumbent.omega, config.perturbation, rng)
+            theta = perturb(state.incumbent.theta, self.config.perturbation, rng)
+            omega = perturb(state.incumbent.omega, self.config.perturbation, rng)
             parent = state.incumbent_index
-        start = time.perf_counter()
-        optimum = local_search(theta, omega, seeds.local_search)
-        seconds = time.perf_counter() - start
+        return SearchRequest(index, parent, theta, omega, seeds.local_search)
+
+    def record(self, request: SearchRequest, optimum: LocalOptimum, seconds: float) -> Trial:
+        """Accept (``f >= f*``) or reject the optimum of ``request`` and return its trial."""
+        state = self.state
+        if request.index != len(state.trials):
+            raise ValueError(f"trial {request.index} recorded, trial {len(state.trials)} due")
         accepted = state.incumbent is None or optimum.fitness >= state.incumbent.fitness
         trial = Trial(
-            index=index,
-            parent=parent,
+            index=request.index,
+            parent=request.parent,
             fitness=float(optimum.fitness),
             accepted=accepted,
             seconds=seconds,
@@ -178,8 +208,29 @@ def basin_hopping_steps(
             stop_reason=optimum.stop_reason,
             behaviour=dict(optimum.behaviour or {}),
         )
-        state.record(trial, optimum, config)
-        yield state, trial, optimum
+        state.record(trial, optimum, self.config)
+        return trial
+
+
+def basin_hopping_steps(
+    local_search: LocalSearch,
+    initial: tuple[np.ndarray, np.ndarray],
+    config: BasinHoppingConfig,
+    run_seed: int,
+    state: RunState | None = None,
+) -> Iterator[tuple[RunState, Trial, LocalOptimum]]:
+    """Run Algorithm 2 one local search at a time, yielding after each.
+
+    ``initial`` holds the random starting Actor and Critic; see :class:`BasinHoppingRun`.
+    The caller stores each yielded trial before asking for the next.
+    """
+    run = BasinHoppingRun(initial, config, run_seed, state)
+    while not run.finished:
+        request = run.next_search()
+        start = time.perf_counter()
+        optimum = local_search(request.theta, request.omega, request.seed)
+        trial = run.record(request, optimum, time.perf_counter() - start)
+        yield run.state, trial, optimum
 
 
 def basin_hopping(
@@ -197,23 +248,30 @@ def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSear
     """The paper's ``F``: the DDPG local search bound to an environment and ``h``. With
     ``describe_optima`` every optimum also gets its behaviour descriptor and label
     (:mod:`lonlib.behaviour`) from one greedy rollout plus a batch of perturbed starts."""
-    from lonlib.behaviour import describe_columns
     from lonlib.ddpg import local_search
 
     def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
         result = local_search(theta, omega, env_config, hp, seed)
-        behaviour = (
-            describe_columns(result.theta, env_config, hp.eval_seed) if describe_optima else None
-        )
-        return LocalOptimum(
-            fitness=result.fitness,
-            theta=result.theta,
-            omega=result.omega,
-            env_steps=result.env_steps,
-            history=[dataclasses.asdict(record) for record in result.history],
-            start_fitness=result.start_fitness,
-            stop_reason=result.stop_reason,
-            behaviour=behaviour,
-        )
+        return local_optimum(result, env_config, hp, describe_optima)
 
     return search
+
+
+def local_optimum(result, env_config, hp, describe_optima: bool = True) -> LocalOptimum:
+    """A DDPG :class:`lonlib.ddpg.LocalSearchResult` as Algorithm 2's :class:`LocalOptimum`
+    (with its behaviour descriptor when ``describe_optima``)."""
+    from lonlib.behaviour import describe_columns
+
+    behaviour = (
+        describe_columns(result.theta, env_config, hp.eval_seed) if describe_optima else None
+    )
+    return LocalOptimum(
+        fitness=result.fitness,
+        theta=result.theta,
+        omega=result.omega,
+        env_steps=result.env_steps,
+        history=[dataclasses.asdict(record) for record in result.history],
+        start_fitness=result.start_fitness,
+        stop_reason=result.stop_reason,
+        behaviour=behaviour,
+    )

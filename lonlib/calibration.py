@@ -67,6 +67,7 @@ from lonlib.validation import (
 MOTORS = ("force", "acceleration", "velocity")
 INTEGRATORS = ("euler", "semi-implicit")
 REWARDS = ("height", "slow-height", "upright")
+CELL_PHYSICS = ("motor", "integrator", "motor_gain", "motor_tau", "reward")
 BEHAVIOURS = ("balances", "spins", "swings", "hangs", "ends early")
 
 CELL_COLUMNS = [
@@ -228,6 +229,10 @@ class CalibrationConfig:
         out = self.to_dict()
         for key in ("name", "cells", "drift_steps"):
             out.pop(key)
+        # Every cell replaces these, so a change of the package's physics defaults must not
+        # invalidate stored cells.
+        for key in CELL_PHYSICS:
+            out["env"].pop(key)
         return out
 
     @classmethod

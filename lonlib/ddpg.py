@@ -25,8 +25,12 @@ Actor at the stop is evaluated and returned (``final_evaluation``).
 
 An agent stops when its greedy fitness has not improved for ``patience_steps`` environment
 steps counted from the end of the warm-up (never before ``min_steps``) or at ``max_steps``.
-An agent that has stopped keeps riding along in the batched update until the last one stops
-(its result is frozen; the wasted work is the price of one batched matmul per layer).
+
+The agents live in the slots of a :class:`SlotTrainer`: every random number an agent draws
+comes from its own counter-based stream (:mod:`lonlib.random_streams`), so an agent's search
+is bit for bit the same alone, batched with others, or in any slot, and a slot whose search
+ended can be refilled with a new one (the lockstep executor, :mod:`lonlib.lockstep`) or
+dropped from the batch (:meth:`SlotTrainer.shrink`).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -41,7 +46,15 @@ from tqdm.auto import tqdm
 
 from lonlib.ddpg_update import LEARNERS, learner_class
 from lonlib.nets import NetSpec, actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import CoupledPendulums, PendulumConfig, StepResult, evaluate
+from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.random_streams import (
+    EXPLORATION_NOISE,
+    REPLAY_SAMPLES,
+    START_NOISE,
+    WARMUP_ACTIONS,
+    CounterStreams,
+)
+from lonlib.replay import ReplayBuffer
 from lonlib.validation import check_choice, check_field_types, check_range
 
 
@@ -193,131 +206,342 @@ def local_search_batch(
 
     Agent ``i`` starts from ``thetas[i]``, ``omegas[i]`` with an empty replay buffer and
     target networks copied from them, and draws every random number of its training
-    (warm-up actions, exploration noise, replay sampling, episode start noise) from
-    ``np.random.default_rng(seeds[i])``: its result does not depend on the other agents.
+    (warm-up actions, exploration noise, replay sampling, episode start noise) from its own
+    counter-based stream of ``seeds[i]`` (:mod:`lonlib.random_streams`): its result does not
+    depend on the other agents. Agents that stop early leave the batch
+    (:meth:`SlotTrainer.shrink`), so the others train without carrying them.
     """
-    k = len(seeds)
-    n = env_config.n_carts
-    a_spec, c_spec = actor_spec(n), critic_spec(n)
-    thetas = check_parameters("theta", thetas, a_spec.n_params, k)
-    omegas = check_parameters("omega", omegas, c_spec.n_params, k)
-    torch.set_num_threads(hp.threads)
-    device = torch.device(hp.device)
-    rngs = [np.random.default_rng(seed) for seed in seeds]
-    start_time = time.perf_counter()
-
-    learner = make_learner(a_spec, c_spec, thetas, omegas, hp)
-    replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, device)
-
-    def greedy(flat_theta: np.ndarray) -> tuple[float, float]:
-        """Greedy (noise-free) fitness and reward return of one Actor."""
-        return greedy_score(a_spec, flat_theta, env_config, hp.eval_seed)
-
-    start_scores = [greedy(thetas[i]) for i in range(k)]
-    no_candidate = (-np.inf, -np.inf)
-    scores = list(start_scores) if hp.count_start else [no_candidate] * k
-    results = [
-        LocalSearchResult(
-            fitness=start_scores[i][0] if hp.count_start else -np.inf,
-            theta=thetas[i].copy(),
-            omega=omegas[i].copy(),
-            start_fitness=start_scores[i][0],
-            env_steps=0,
-            seconds=0.0,
-            stop_reason="budget",
-        )
-        for i in range(k)
-    ]
-    # The patience window opens when training starts (the first update).
-    last_improvement = np.full(k, hp.warmup_steps, dtype=np.int64)
-    active = np.ones(k, dtype=bool)
-
-    sim = CoupledPendulums(env_config, k)
-    _reset(sim, rngs, np.ones(k, dtype=bool))
-    obs = sim.observe().astype(np.float32)
-    episode_return = np.zeros(k)
-    episode_index = np.zeros(k, dtype=np.int64)
-    losses: list[list[tuple[float, float]]] = [[] for _ in range(k)]
-
-    bar = tqdm(total=hp.max_steps, desc=f"DDPG x{k}", disable=not progress, leave=False)
-    step = updates = 0
-    while active.any():
-        # 1. act
-        if step < hp.warmup_steps:
-            actions = np.stack([rng.uniform(0.0, 1.0, n) for rng in rngs])
-        else:
-            mu = learner.act(torch.as_tensor(obs, device=device))
-            actions = exploration_actions(mu.cpu().numpy().astype(np.float64), rngs, hp.noise_std)
-        # 2. step and store
-        outcome = sim.step(actions)
-        next_obs = sim.observe().astype(np.float32)
-        replay.add_step(obs, actions, outcome, next_obs)
-        episode_return += outcome.reward
-        step += 1
-        # 3. update
-        if step >= hp.warmup_steps:
-            indices = np.stack([rng.integers(0, replay.size, hp.batch_size) for rng in rngs])
-            critic_loss, actor_loss = learner.update(replay.sample(indices))
-            updates += 1
-            for i in np.flatnonzero(active):
-                losses[i].append((critic_loss[i], actor_loss[i]))
-        # 4. episode ends: greedy fitness of trained policies, best parameters, reset
-        ended = outcome.terminated | outcome.truncated
-        if ended.any():
-            candidate = hp.count_start or updates > 0
-            flat_actor = learner.actor_flat()
-            flat_critic = learner.critic_flat() if (ended & active).any() and candidate else None
-            for i in np.flatnonzero(ended & active):
-                score = greedy(flat_actor[i]) if candidate else (np.nan, np.nan)
-                if candidate and is_improvement(score, scores[i], hp.plateau_tiebreak):
-                    scores[i] = score
-                    results[i].fitness = score[0]
-                    results[i].theta = flat_actor[i].copy()
-                    results[i].omega = flat_critic[i].copy()
-                    last_improvement[i] = step
-                episode_losses = np.array(losses[i]) if losses[i] else np.full((1, 2), np.nan)
-                results[i].history.append(
-                    EpisodeRecord(
-                        episode=int(episode_index[i]),
-                        env_steps=step,
-                        episode_return=float(episode_return[i]),
-                        episode_length=int(sim.step_count[i]),
-                        greedy_fitness=score[0],
-                        greedy_return=score[1],
-                        critic_loss=float(np.mean(episode_losses[:, 0])),
-                        actor_loss=float(np.mean(episode_losses[:, 1])),
-                        seconds=time.perf_counter() - start_time,
-                    )
-                )
-                losses[i] = []
-            episode_index[ended] += 1
-            episode_return[ended] = 0.0
-            _reset(sim, rngs, ended)
-            obs = sim.observe().astype(np.float32)
-        else:
-            obs = next_obs
-        # stopping rules
-        stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)
-        stop = active & (stale | (step >= hp.max_steps))
-        if stop.any():
-            flat_actor, flat_critic = learner.actor_flat(), learner.critic_flat()
-        for i in np.flatnonzero(stop):
-            if scores[i] is no_candidate:  # no training episode ended: judge the Actor now
-                scores[i] = greedy(flat_actor[i])
-                results[i].fitness = scores[i][0]
-                results[i].theta = flat_actor[i].copy()
-                results[i].omega = flat_critic[i].copy()
-                results[i].final_evaluation = True
-            results[i].stop_reason = "patience" if stale[i] else "budget"
-            results[i].env_steps = step
-            results[i].updates = updates
-            results[i].seconds = time.perf_counter() - start_time
-        active &= ~stop
-        if progress and step % 500 == 0:
+    trainer = SlotTrainer(thetas, omegas, seeds, env_config, hp)
+    results: list[LocalSearchResult | None] = [None] * len(seeds)
+    bar = tqdm(total=hp.max_steps, desc=f"DDPG x{len(seeds)}", disable=not progress, leave=False)
+    while trainer.busy.any():
+        for tag, result in trainer.step():
+            results[tag] = result
+        if trainer.busy.sum() * 2 <= trainer.slots:
+            trainer.shrink()
+        if progress and int(trainer.steps.max()) % 500 == 0:
             bar.update(500)
-            bar.set_postfix(best=f"{max(r.fitness for r in results):.3f}", active=int(active.sum()))
+            best = max((r.fitness for r in trainer.results()), default=float("nan"))
+            bar.set_postfix(best=f"{best:.3f}", active=int(trainer.busy.sum()))
     bar.close()
     return results
+
+
+@dataclass
+class _Search:
+    """Host-side bookkeeping of the local search in one slot (touched only at events)."""
+
+    tag: Any
+    theta: np.ndarray  # start parameters
+    omega: np.ndarray
+    result: LocalSearchResult
+    best: tuple[float, float]  # greedy (fitness, return) of the returned parameters so far
+    started: float  # time.perf_counter() at its start
+
+
+class SlotTrainer:
+    """``K`` slots, each training one DDPG local search; all ``K`` step in lockstep.
+
+    Every slot has its own environment, replay buffer, random streams, Actor, Critic,
+    targets and Adam state; one :meth:`step` advances every busy slot by one environment
+    step and runs one batched update of all of them. A slot's search ends by its own
+    patience or budget; :meth:`step` returns it, and :meth:`start` refills the slot with a
+    new search (the lockstep executor's continuous batching). Per step there is no Python
+    loop over slots: actions, noise, replay writes and samples are array operations; work
+    per slot happens only at events (an episode end, a search's start and end), and the
+    greedy evaluations of all slots whose episodes end in the same step are one batched
+    rollout.
+
+    A slot in its warm-up acts uniformly at random and is not updated: the batched update
+    runs over every slot, so a slot's learner state is restored to its start parameters
+    when its warm-up ends if the batch touched it meanwhile (one copy per search).
+    """
+
+    def __init__(
+        self,
+        thetas: np.ndarray,
+        omegas: np.ndarray,
+        seeds: Sequence[int],
+        env_config: PendulumConfig,
+        hp: DDPGConfig,
+        tags: Sequence[Any] | None = None,
+    ) -> None:
+        k = len(seeds)
+        if k < 1:
+            raise ValueError("at least one local search is needed")
+        n = env_config.n_carts
+        self.env_config, self.hp, self.n = env_config, hp, n
+        self.a_spec, self.c_spec = actor_spec(n), critic_spec(n)
+        thetas = check_parameters("theta", thetas, self.a_spec.n_params, k)
+        omegas = check_parameters("omega", omegas, self.c_spec.n_params, k)
+        torch.set_num_threads(hp.threads)
+        self.device = torch.device(hp.device)
+        self.learner = make_learner(self.a_spec, self.c_spec, thetas, omegas, hp)
+        self.replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, self.device)
+        self.streams = CounterStreams([0] * k, self.device)
+        self.sim = CoupledPendulums(env_config, k)
+        self.searches: list[_Search | None] = [None] * k
+        self.busy = np.zeros(k, dtype=bool)
+        self.steps = np.zeros(k, dtype=np.int64)  # env steps of each slot's search
+        self.updates = np.zeros(k, dtype=np.int64)
+        self.episodes = np.zeros(k, dtype=np.int64)
+        self.episode_return = np.zeros(k)
+        self.last_improvement = np.zeros(k, dtype=np.int64)
+        self.dirty = np.zeros(k, dtype=bool)  # learner state changed while in the warm-up
+        self.loss_sum = torch.zeros(2, k, dtype=torch.float64, device=self.device)
+        self.loss_count = np.zeros(k, dtype=np.int64)
+        self.obs = np.zeros((k, env_config.observation_size), dtype=np.float32)
+        self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)), fresh=True)
+
+    @property
+    def slots(self) -> int:
+        """Number of slots ``K``."""
+        return len(self.searches)
+
+    def free_slots(self) -> list[int]:
+        """Slots without a search."""
+        return np.flatnonzero(~self.busy).tolist()
+
+    def results(self) -> list[LocalSearchResult]:
+        """The results so far of the searches in progress."""
+        return [s.result for s, busy in zip(self.searches, self.busy, strict=True) if busy and s]
+
+    # ------------------------------------------------------------------ starting searches
+    def start(
+        self,
+        slots: Sequence[int],
+        thetas: np.ndarray,
+        omegas: np.ndarray,
+        seeds: Sequence[int],
+        tags: Sequence[Any],
+    ) -> None:
+        """Refill free ``slots`` with new searches (parameters, seeds, tags to report them
+        by): parameters, targets, Adam state, replay buffer, streams and environment reset."""
+        if not hasattr(self.learner, "reset_agent"):
+            raise ValueError(f"the {self.hp.update!r} learner cannot refill slots; use 'lean'")
+        if any(self.busy[i] for i in slots):
+            raise ValueError(f"slots {list(slots)} are not all free")
+        thetas = check_parameters("theta", thetas, self.a_spec.n_params, len(slots))
+        omegas = check_parameters("omega", omegas, self.c_spec.n_params, len(slots))
+        for slot, theta, omega in zip(slots, thetas, omegas, strict=True):
+            self.learner.reset_agent(slot, theta, omega)
+        self._start(list(slots), thetas, omegas, seeds, list(tags), fresh=False)
+
+    def _start(self, slots, thetas, omegas, seeds, tags, fresh: bool) -> None:
+        now = time.perf_counter()
+        start_scores = greedy_scores(self.a_spec, thetas, self.env_config, self.hp.eval_seed)
+        for j, slot in enumerate(slots):
+            self.streams.set_seed(slot, seeds[j])
+            self.replay.clear(slot)
+            score = (float(start_scores[0][j]), float(start_scores[1][j]))
+            counted = self.hp.count_start
+            result = LocalSearchResult(
+                fitness=score[0] if counted else -np.inf,
+                theta=thetas[j].copy(),
+                omega=omegas[j].copy(),
+                start_fitness=score[0],
+                env_steps=0,
+                seconds=0.0,
+                stop_reason="budget",
+            )
+            best = score if counted else (-np.inf, -np.inf)
+            self.searches[slot] = _Search(
+                tags[j], thetas[j].copy(), omegas[j].copy(), result, best, now
+            )
+        index = np.asarray(slots)
+        self.busy[index] = True
+        for array in (self.steps, self.updates, self.episodes, self.loss_count):
+            array[index] = 0
+        self.episode_return[index] = 0.0
+        self.dirty[index] = False
+        # The patience window opens when training starts (the first update).
+        self.last_improvement[index] = self.hp.warmup_steps
+        self.loss_sum[:, torch.as_tensor(index, device=self.device)] = 0.0
+        mask = np.zeros(self.slots, dtype=bool)
+        mask[index] = True
+        self._reset_environments(mask)
+
+    # ------------------------------------------------------------------ one step
+    def step(self) -> list[tuple[Any, LocalSearchResult]]:
+        """One environment step and one batched update of every busy slot; returns
+        ``(tag, result)`` of the searches that ended in this step (their slots are free)."""
+        hp = self.hp
+        busy = self.busy
+        # 1. act: uniform during the warm-up, then the Actor plus clipped Gaussian noise
+        actions = self._actions(self.steps < hp.warmup_steps)
+        # 2. step every environment and store the transitions
+        outcome = self.sim.step(actions)
+        next_obs = self.sim.observe().astype(np.float32)
+        self.replay.add_step(self.obs, actions, outcome, next_obs)
+        self.episode_return += outcome.reward
+        self.steps += busy
+        # 3. update the slots past their warm-up (one batched update of all slots)
+        training = busy & (self.steps >= hp.warmup_steps)
+        if training.any():
+            for slot in np.flatnonzero(training & (self.updates == 0) & self.dirty):
+                search = self.searches[slot]
+                self.learner.reset_agent(slot, search.theta, search.omega)
+            indices = self.streams.integers(
+                REPLAY_SAMPLES, self.steps, hp.batch_size, self.replay.size
+            )
+            losses = self.learner.train(self.replay.sample(indices))
+            self.dirty |= ~training
+            self.loss_sum += losses.to(torch.float64) * torch.as_tensor(
+                training, dtype=torch.float64, device=self.device
+            )
+            self.loss_count += training
+            self.updates += training
+        # 4. episode ends: greedy fitness of the trained Actors, best parameters, reset
+        ended = (outcome.terminated | outcome.truncated) & busy
+        if ended.any():
+            self._end_episodes(ended)
+            self._reset_environments(ended)
+        else:
+            self.obs = next_obs
+        # stopping rules: patience (counted from the end of the warm-up) or budget
+        stale = (self.steps >= hp.min_steps) & (
+            self.steps - self.last_improvement >= hp.patience_steps
+        )
+        stop = busy & (stale | (self.steps >= hp.max_steps))
+        return self._stop(stop, stale) if stop.any() else []
+
+    def _actions(self, warm: np.ndarray) -> np.ndarray:
+        """``[K, n]`` actions in [0, 1]: uniform for slots in their warm-up, else the Actor
+        plus N(0, noise_std) noise, clipped; every draw from the slot's own streams."""
+        n = self.n
+        actions = self.streams.uniform(WARMUP_ACTIONS, self.steps, n)
+        if (self.busy & ~warm).any():
+            mu = self.learner.act(torch.as_tensor(self.obs, device=self.device))
+            noise = self.streams.normal(EXPLORATION_NOISE, self.steps, n)
+            explore = exploration_actions(mu, noise, self.hp.noise_std)
+            warm_rows = torch.as_tensor(warm, device=self.device)[:, None]
+            actions = torch.where(warm_rows, actions, explore)
+        return actions.cpu().numpy()
+
+    def _reset_environments(self, mask: np.ndarray) -> None:
+        """Reset the masked environments, each with start noise from its own stream (the
+        episode number is the counter), and observe."""
+        level = self.env_config.initial_noise
+        noise = None
+        if level > 0:
+            u = self.streams.uniform(START_NOISE, self.episodes, 4 * self.n).cpu().numpy()
+            noise = level * (2.0 * u[mask].reshape(-1, 4, self.n).transpose(1, 0, 2) - 1.0)
+        self.sim.reset(mask, noise)
+        self.obs = self.sim.observe().astype(np.float32)
+
+    def _end_episodes(self, ended: np.ndarray) -> None:
+        """Judge the policies of the slots whose training episode ended (one batched greedy
+        rollout) and record the episode."""
+        hp = self.hp
+        slots = np.flatnonzero(ended)
+        trained = self.updates[slots] > 0
+        candidate = trained | hp.count_start
+        flat_actor = self.learner.actor_flat() if trained.any() else None
+        judged = slots[candidate]
+        scores = (np.array([]), np.array([]))
+        if judged.size:  # during the warm-up the Actor still is the start
+            thetas = [
+                flat_actor[i] if self.updates[i] > 0 else self.searches[i].theta for i in judged
+            ]
+            scores = greedy_scores(self.a_spec, np.stack(thetas), self.env_config, hp.eval_seed)
+        counts = np.maximum(self.loss_count[slots], 1)
+        loss_means = (
+            self.loss_sum[:, torch.as_tensor(slots, device=self.device)].cpu().numpy() / counts
+        )
+        flat_critic = None
+        now = time.perf_counter()
+        judged_index = {slot: j for j, slot in enumerate(judged)}
+        for j, slot in enumerate(slots):
+            search = self.searches[slot]
+            score = (np.nan, np.nan)
+            if slot in judged_index:
+                jj = judged_index[slot]
+                score = (float(scores[0][jj]), float(scores[1][jj]))
+                if is_improvement(score, search.best, hp.plateau_tiebreak):
+                    search.best = score
+                    search.result.fitness = score[0]
+                    if self.updates[slot] > 0:
+                        if flat_critic is None:
+                            flat_critic = self.learner.critic_flat()
+                        search.result.theta = flat_actor[slot].copy()
+                        search.result.omega = flat_critic[slot].copy()
+                    else:
+                        search.result.theta = search.theta.copy()
+                        search.result.omega = search.omega.copy()
+                    self.last_improvement[slot] = self.steps[slot]
+            no_losses = self.loss_count[slot] == 0
+            search.result.history.append(
+                EpisodeRecord(
+                    episode=int(self.episodes[slot]),
+                    env_steps=int(self.steps[slot]),
+                    episode_return=float(self.episode_return[slot]),
+                    episode_length=int(self.sim.step_count[slot]),
+                    greedy_fitness=score[0],
+                    greedy_return=score[1],
+                    critic_loss=np.nan if no_losses else float(loss_means[0, j]),
+                    actor_loss=np.nan if no_losses else float(loss_means[1, j]),
+                    seconds=now - search.started,
+                )
+            )
+        self.episodes[slots] += 1
+        self.episode_return[slots] = 0.0
+        self.loss_count[slots] = 0
+        self.loss_sum[:, torch.as_tensor(slots, device=self.device)] = 0.0
+
+    def _stop(self, stop: np.ndarray, stale: np.ndarray) -> list[tuple[Any, LocalSearchResult]]:
+        """Finish the searches of the ``stop`` slots and free them."""
+        slots = np.flatnonzero(stop)
+        unjudged = [i for i in slots if self.searches[i].best[0] == -np.inf]
+        if unjudged:  # no training episode ended: judge the Actor at the stop
+            flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
+            fitness, returns = greedy_scores(
+                self.a_spec, flat_actor[unjudged], self.env_config, self.hp.eval_seed
+            )
+            for j, slot in enumerate(unjudged):
+                result = self.searches[slot].result
+                result.fitness = float(fitness[j])
+                result.theta = flat_actor[slot].copy()
+                result.omega = flat_critic[slot].copy()
+                result.final_evaluation = True
+        now = time.perf_counter()
+        finished = []
+        for slot in slots:
+            search = self.searches[slot]
+            result = search.result
+            result.stop_reason = "patience" if stale[slot] else "budget"
+            result.env_steps = int(self.steps[slot])
+            result.updates = int(self.updates[slot])
+            result.seconds = now - search.started
+            finished.append((search.tag, result))
+            self.searches[slot] = None
+        self.busy[slots] = False
+        return finished
+
+    # ------------------------------------------------------------------ fewer slots
+    def shrink(self) -> None:
+        """Drop the free slots so that the batch carries only busy ones (no work for
+        searches that have stopped). Needs the lean learner; with another it does nothing."""
+        keep = np.flatnonzero(self.busy).tolist()
+        if len(keep) == self.slots or not keep or not hasattr(self.learner, "select"):
+            return
+        self.learner = self.learner.select(keep)
+        self.replay = self.replay.select(keep)
+        self.streams = self.streams.select(keep)
+        self.sim = self.sim.select(keep)
+        self.searches = [self.searches[i] for i in keep]
+        for name in (
+            "busy",
+            "steps",
+            "updates",
+            "episodes",
+            "episode_return",
+            "last_improvement",
+            "dirty",
+            "loss_count",
+            "obs",
+        ):
+            setattr(self, name, getattr(self, name)[keep])
+        self.loss_sum = self.loss_sum[:, torch.as_tensor(keep, device=self.device)]
 
 
 def make_learner(
@@ -337,97 +561,28 @@ def make_learner(
     )
 
 
-def exploration_actions(
-    mu: np.ndarray, rngs: Sequence[np.random.Generator], noise_std: float
-) -> np.ndarray:
-    """The Actor's actions ``mu [k, n]`` plus N(0, noise_std) noise (a standard deviation)
-    from each agent's own stream, clipped to the action range [0, 1]."""
-    noise = np.stack([rng.normal(0.0, noise_std, mu.shape[1]) for rng in rngs])
-    return np.clip(mu + noise, 0.0, 1.0)
+def exploration_actions(mu: torch.Tensor, noise: torch.Tensor, noise_std: float) -> torch.Tensor:
+    """The Actor's actions ``mu [k, n]`` plus ``noise_std`` times standard normal ``noise``
+    (``noise_std`` is a standard deviation), clipped to the action range [0, 1], float64."""
+    return torch.clamp(mu.to(torch.float64) + noise_std * noise, 0.0, 1.0)
+
+
+def greedy_scores(
+    spec: NetSpec, thetas: np.ndarray, env_config: PendulumConfig, eval_seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Greedy (noise-free) fitness (Algorithm 1) and reward return of ``m`` flat Actors
+    ``[m, P]``, evaluated as one batch: every Actor in its own environment, all from the
+    start a single evaluation with ``eval_seed`` draws, each with its own weights (a row's
+    numbers are bit for bit what that Actor scores alone)."""
+    thetas = np.asarray(thetas, dtype=np.float32)
+    policy = lambda obs: forward_numpy(spec, thetas, obs)  # noqa: E731
+    result = evaluate(policy, env_config, thetas.shape[0], eval_seed, same_start=True)
+    return result.fitness.copy(), result.episode_return
 
 
 def greedy_score(
     spec: NetSpec, flat_theta: np.ndarray, env_config: PendulumConfig, eval_seed: int
 ) -> tuple[float, float]:
     """Greedy (noise-free) fitness (Algorithm 1) and reward return of one flat Actor."""
-    policy = lambda obs: forward_numpy(spec, flat_theta, obs)  # noqa: E731
-    result = evaluate(policy, env_config, 1, eval_seed)
-    return float(result.fitness[0]), float(result.episode_return[0])
-
-
-def _reset(sim: CoupledPendulums, rngs: list[np.random.Generator], mask: np.ndarray) -> None:
-    """Reset the masked environments, each drawing its start noise from its agent's stream."""
-    noise_level = sim.config.initial_noise
-    noise = None
-    if noise_level > 0:
-        noise = np.stack(
-            [
-                rngs[i].uniform(-noise_level, noise_level, size=(4, sim.config.n_carts))
-                for i in np.flatnonzero(mask)
-            ],
-            axis=1,
-        )
-    sim.reset(mask, noise)
-
-
-class ReplayBuffer:
-    """``k`` ring buffers of transitions in one torch tensor ``[k, capacity, width]``.
-
-    A row packs ``(s, a, r, s', 1 - terminated)``, so a sample is one ``index_select`` per
-    batch instead of one gather per field. All agents step together, so one write position
-    and one size serve every agent.
-    """
-
-    def __init__(
-        self, agents: int, capacity: int, obs_size: int, act_size: int, device: torch.device
-    ) -> None:
-        self.obs_size, self.act_size = obs_size, act_size
-        width = 2 * obs_size + act_size + 2
-        self.data = torch.zeros(agents, capacity, width, device=device)
-        self.capacity, self.position, self.size = capacity, 0, 0
-        self.device = device
-        self._row = np.zeros((agents, width), dtype=np.float32)
-        self._offsets = torch.arange(agents, device=device)[:, None] * capacity
-
-    def add_step(
-        self, obs: np.ndarray, actions: np.ndarray, outcome: StepResult, next_obs: np.ndarray
-    ) -> None:
-        """Store one environment step of every agent. Only a true end of the task
-        (collision, tether, boundary) is stored as terminal; reaching the step limit is a
-        truncation, and the target still bootstraps from its next state."""
-        self.add(obs, actions, outcome.reward, next_obs, outcome.terminated)
-
-    def add(
-        self,
-        obs: np.ndarray,
-        actions: np.ndarray,
-        rewards: np.ndarray,
-        next_obs: np.ndarray,
-        terminated: np.ndarray,
-    ) -> None:
-        """Store one transition per agent (arrays with a leading agent dimension)."""
-        o, a = self.obs_size, self.act_size
-        row = self._row
-        row[:, :o] = obs
-        row[:, o : o + a] = actions
-        row[:, o + a] = rewards
-        row[:, o + a + 1 : 2 * o + a + 1] = next_obs
-        row[:, -1] = ~terminated
-        self.data[:, self.position] = torch.from_numpy(row)
-        self.position = (self.position + 1) % self.capacity
-        self.size = min(self.size + 1, self.capacity)
-
-    def sample(self, indices: np.ndarray) -> tuple[torch.Tensor, ...]:
-        """Transitions at ``indices [k, batch]`` (agent ``i`` reads only its own buffer):
-        ``(s, a, r, s', not_done)``, each ``[k, batch, ...]``."""
-        idx = torch.as_tensor(indices, device=self.device) + self._offsets
-        flat = self.data.view(-1, self.data.shape[-1])
-        batch = flat.index_select(0, idx.view(-1)).view(*idx.shape, -1)
-        o, a = self.obs_size, self.act_size
-        return (
-            batch[..., :o],
-            batch[..., o : o + a],
-            batch[..., o + a : o + a + 1],
-            batch[..., o + a + 1 : 2 * o + a + 1],
-            batch[..., -1:],
-        )
+    fitness, returns = greedy_scores(spec, np.asarray(flat_theta)[None], env_config, eval_seed)
+    return float(fitness[0]), float(returns[0])

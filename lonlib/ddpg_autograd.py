@@ -103,6 +103,10 @@ class AutogradDDPG:
             self.tau,
         )
 
+    def train(self, batch: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """:meth:`update` with the losses as a ``[2, k]`` tensor."""
+        return torch.as_tensor(np.stack(self.update(batch)))
+
     def act(self, obs: torch.Tensor) -> torch.Tensor:
         """Greedy actions ``[k, n]`` of the online Actors for one observation each ``[k, o]``."""
         with torch.no_grad():

@@ -36,6 +36,7 @@ import torch
 
 from lonlib.ddpg_autograd import AutogradDDPG
 from lonlib.nets import NetSpec
+from lonlib.random_streams import SIMD_PAD
 
 BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults, as the autograd reference uses
 EPS = 1e-8
@@ -187,6 +188,7 @@ class LeanDDPG:
         self._actor_grads = self.actor_layout.views(self.actor_grad)
         self._critic_grads = self.critic_layout.views(self.critic_grad)
         self._batch_size = 0
+        self._act_out = torch.zeros(k, -(-act_size // SIMD_PAD) * SIMD_PAD, device=self.device)
         act_input = self._with_ones(k, obs_size + 1, 1, ones_at=-2)
         self._act_obs = act_input[:, :-1, 0]
         self._act_pass = _forward_steps(
@@ -240,6 +242,26 @@ class LeanDDPG:
         self.critic_moments[:, agent] = 0.0
         self.steps[agent] = 0
 
+    def select(self, index: list[int]) -> LeanDDPG:
+        """A learner of only the agents at ``index``, in that order: parameters, targets,
+        Adam moments and step counts carried over exactly (a batch that sheds finished
+        agents computes the others bit for bit as before)."""
+        rows = torch.as_tensor(index, device=self.device)
+        out = LeanDDPG(
+            self.actor_layout.spec,
+            self.critic_layout.spec,
+            self.actor_flat()[index],
+            self.critic_flat()[index],
+            learning_rate=self.learning_rate,
+            gamma=self.gamma,
+            tau=self.tau,
+            device=self.device,
+        )
+        for name in ("actor_params", "critic_params", "actor_moments", "critic_moments"):
+            getattr(out, name).copy_(getattr(self, name)[:, rows])
+        out.steps[:] = self.steps[index]
+        return out
+
     # ---------------------------------------------------------------------------- buffers
     def _with_ones(self, *shape: int, ones_at: int = -1) -> torch.Tensor:
         """A zero buffer whose last row (``ones_at=-2``) or column (``-1``) is ones."""
@@ -279,6 +301,9 @@ class LeanDDPG:
         self._dq_rows = self._dq.view(k, batch, 1)
         self._losses = torch.empty(2, k, 1, 1, device=device)  # sums: (q - y)^2 and q(s, mu)
         self._loss_views = (self._dq, self._dq_rows, *self._losses, self._losses.view(2, k))
+        # sums -> means: critic MSE, actor loss -mean Q
+        self._loss_scale = torch.tensor([[1.0 / batch], [-1.0 / batch]], device=device)
+        self._mean_losses = torch.empty(2, k, device=device)
         hidden = [h[:k] for h in critic_h[:-1]]
         dh = [torch.empty(k, out, batch, device=device) for _, out, _ in self.critic_layout.blocks]
         self._critic_backward = _backward_steps(
@@ -323,6 +348,13 @@ class LeanDDPG:
     def update(self, batch: tuple[torch.Tensor, ...]) -> tuple[np.ndarray, np.ndarray]:
         """One DDPG update of every agent on ``(s, a, r, s', not_done)``, each ``[k, B, .]``;
         returns the per-agent critic and actor losses ``[k]`` (float32)."""
+        losses = self.train(batch).cpu().numpy().copy()  # the buffer is reused next update
+        return losses[0], losses[1]
+
+    def train(self, batch: tuple[torch.Tensor, ...]) -> torch.Tensor:
+        """:meth:`update` without waiting for the device: the per-agent critic and actor
+        losses stay on the learner's device as a ``[2, k]`` tensor (valid until the next
+        update)."""
         obs, actions, rewards, next_obs, not_done = batch
         k, size = obs.shape[:2]
         if k != self.agents:
@@ -338,7 +370,7 @@ class LeanDDPG:
         dq, dq_rows, critic_loss, actor_loss, losses = self._loss_views
         target = torch.addcmul(rewards, not_done, self._q_next, value=self.gamma, out=self._target)
         torch.sub(self._q, target, out=dq_rows)
-        torch.bmm(dq, dq_rows, out=critic_loss)  # sum of squares per agent
+        _bmm(dq, dq_rows, critic_loss)  # sum of squares per agent
         dq.mul_(2.0 / size)  # d(mean squared error)/dq
         _backward(self._critic_backward)
         self._adam(*self._adam_views[0])
@@ -349,16 +381,15 @@ class LeanDDPG:
         # d(-sum Q / B)/dh is the output weight row over -B for every sample (broadcast).
         _sigmoid_backward_(torch.mul(row, -1.0 / size, out=self._row), h, out=dz)
         for weight_t, dz, dh, s in self._critic_input_backward:
-            _sigmoid_backward_(torch.bmm(weight_t, dz, out=dh), s)
+            _sigmoid_backward_(_bmm(weight_t, dz, dh), s)
         action_columns, dz = self._action_columns
-        _sigmoid_backward_(torch.bmm(action_columns, dz, out=self._dmu), self._mu)
+        _sigmoid_backward_(_bmm(action_columns, dz, self._dmu), self._mu)
         _backward(self._actor_backward)
         self._adam(*self._adam_views[1])
 
         self.actor_params[0].lerp_(self.actor_params[1], self.tau)
         self.critic_params[1].lerp_(self.critic_params[0], self.tau)
-        losses = (losses if losses.device.type == "cpu" else losses.cpu()).numpy()
-        return losses[0] / size, losses[1] / -size
+        return torch.mul(losses, self._loss_scale, out=self._mean_losses)
 
     def _next_step(self) -> None:
         """Advance every agent's Adam step and refresh the bias-corrected coefficients."""
@@ -390,7 +421,10 @@ class LeanDDPG:
     def act(self, obs: torch.Tensor) -> torch.Tensor:
         """Greedy actions ``[k, n]`` of the online Actors for one observation each ``[k, o]``."""
         self._act_obs.copy_(obs)
-        return torch.sigmoid(_forward(self._act_pass)[:, :, 0])
+        # The output squashed in whole SIMD vectors per agent, so that no agent's actions
+        # fall in a vector loop's scalar tail (other bits) depending on the batch size.
+        self._act_out[:, : self.act_size] = _forward(self._act_pass)[:, :, 0]
+        return torch.sigmoid(self._act_out)[:, : self.act_size]
 
 
 _Product = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
@@ -414,9 +448,9 @@ def _forward(steps: list[_Product]) -> torch.Tensor:
     """Run :func:`_forward_steps`' products (sigmoid after each hidden layer, in place);
     returns the output layer's pre-activation ``[m, out, B]``."""
     for weight, inputs, output in steps[:-1]:
-        torch.bmm(weight, inputs, out=output).sigmoid_()
+        _bmm(weight, inputs, output).sigmoid_()
     weight, inputs, output = steps[-1]
-    return torch.bmm(weight, inputs, out=output)
+    return _bmm(weight, inputs, output)
 
 
 def _backward_steps(
@@ -429,15 +463,22 @@ def _backward_steps(
 ) -> list[tuple[torch.Tensor, ...]]:
     """Views for :func:`_backward`: per layer from the last, ``(dz, input^T, gradient,
     weight^T without the bias, dh below, activation below)``, then ``(dz, x, gradient)`` for
-    the first layer (``x [m, B, in + 1]`` sample-major)."""
+    the first layer (``x [m, B, in + 1]`` sample-major). A gradient is a ``(view into the
+    flat gradient, buffer the product is written to)`` pair: the per-layer views of ``m > 1``
+    agents are not contiguous, and BLAS may then take another path than for one agent's
+    (contiguous) view, so those products go through a contiguous buffer and a copy."""
+
+    def target(grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return grad, grad if grad.is_contiguous() else torch.empty_like(grad.contiguous())
+
     steps = []
     for layer in range(len(weights) - 1, 0, -1):
         h = hidden[layer - 1]
         below = scratch[layer - 1]
         weight_t = weights[layer][:, :, :-1].transpose(1, 2)
-        steps.append((dz, h.transpose(1, 2), grads[layer], weight_t, below, h[:, :-1]))
+        steps.append((dz, h.transpose(1, 2), target(grads[layer]), weight_t, below, h[:, :-1]))
         dz = below
-    steps.append((dz, x, grads[0]))
+    steps.append((dz, x, target(grads[0])))
     return steps
 
 
@@ -445,14 +486,35 @@ def _backward(steps: list[tuple[torch.Tensor, ...]]) -> None:
     """Weight gradients (bias included: the ones row) of a sigmoid MLP from the output
     pre-activation's gradient, reusing the kept activations; see :func:`_backward_steps`."""
     for dz, inputs_t, grad, weight_t, dh, s in steps[:-1]:
-        torch.bmm(dz, inputs_t, out=grad)
+        _gradient(dz, inputs_t, grad)
         if weight_t.shape[2] == 1:  # a one-unit layer: an outer product, cheaper as a product
             torch.mul(weight_t, dz, out=dh)
         else:
-            torch.bmm(weight_t, dz, out=dh)
+            _bmm(weight_t, dz, dh)
         _sigmoid_backward_(dh, s)
     dz, x, grad = steps[-1]
-    torch.bmm(dz, x, out=grad)
+    _gradient(dz, x, grad)
+
+
+def _gradient(dz: torch.Tensor, inputs_t: torch.Tensor, grad: tuple[torch.Tensor, ...]) -> None:
+    """A layer's weight gradient ``dz @ input^T`` into its view of the flat gradient."""
+    view, buffer = grad
+    _bmm(dz, inputs_t, buffer)
+    if buffer is not view:
+        view.copy_(buffer)
+
+
+def _bmm(a: torch.Tensor, b: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+    """``a @ b`` per agent (``[m, r, n] @ [m, n, c]``) into ``out``, with every agent's
+    result independent of how many agents share the batch. BLAS picks other kernels, and so
+    other summation orders, for one-row or one-column products depending on the batch
+    count; those are written as an elementwise product and a sum (cheap at these sizes),
+    so a search gives the same bits alone or in any lockstep batch."""
+    if a.shape[1] == 1:
+        return torch.sum(a.transpose(1, 2) * b, dim=1, keepdim=True, out=out)
+    if b.shape[2] == 1:
+        return torch.sum(a * b.transpose(1, 2), dim=2, keepdim=True, out=out)
+    return torch.bmm(a, b, out=out)
 
 
 def _sigmoid_backward_(

@@ -17,9 +17,24 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
 
+EXECUTORS = ("auto", "serial", "pool", "dask", "lockstep")
 Job = tuple[float, int]
 Task = Callable[[float, int], Any]
 OnDone = Callable[[Any], None]
+
+
+def resolve_executor(executor: str, workers: int, scheduler: str | None) -> str:
+    """The executor that runs: ``"auto"`` is Dask with a scheduler, a pool for ``workers``
+    > 1, else serial; an explicit choice must fit the other arguments (checked by name)."""
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor must be one of {EXECUTORS}, got {executor!r}")
+    if executor == "auto":
+        return "dask" if scheduler else ("pool" if workers > 1 else "serial")
+    if executor == "dask" and not scheduler:
+        raise ValueError("executor 'dask' needs a scheduler (an address or 'dask-local')")
+    if executor != "dask" and scheduler:
+        raise ValueError(f"a scheduler was given, but executor {executor!r} does not use one")
+    return executor
 
 
 def execute_runs(

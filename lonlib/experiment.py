@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import errno
 import logging
+import time
 import zlib
 from dataclasses import dataclass, field
 from functools import partial
@@ -27,12 +28,14 @@ from tqdm import tqdm
 
 from lonlib.basin_hopping import (
     BasinHoppingConfig,
-    basin_hopping_steps,
+    BasinHoppingRun,
+    RunState,
     ddpg_local_search,
 )
 from lonlib.ddpg import DDPGConfig
-from lonlib.executors import execute_runs
+from lonlib.executors import EXECUTORS, execute_runs, resolve_executor
 from lonlib.lock import LockHeld, exclusive_lock
+from lonlib.lockstep import run_lockstep
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig
@@ -48,7 +51,7 @@ from lonlib.store import (
     save_step,
     write_json,
 )
-from lonlib.validation import check_field_types, check_keys, check_range, is_finite
+from lonlib.validation import check_choice, check_field_types, check_keys, check_range, is_finite
 
 EXECUTION_ONLY_DDPG_FIELDS = ("device", "threads")  # where DDPG runs, not what it computes
 log = logging.getLogger(__name__)
@@ -70,6 +73,8 @@ class ExperimentConfig:
     env: PendulumConfig = field(default_factory=PendulumConfig)
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     note: str = ""
+    executor: str = "auto"  # where runs execute (lonlib.executors.EXECUTORS); not results
+    slots: int = 16  # local searches per batch of the lockstep executor
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -88,6 +93,8 @@ class ExperimentConfig:
         if len(set(self.perturbations)) != len(self.perturbations):
             raise ValueError(f"perturbations must not repeat, got {self.perturbations}")
         check_range("runs", self.runs, 1, 1_000_000)
+        check_choice("executor", self.executor, EXECUTORS)
+        check_range("slots", self.slots, 1, 100_000)
         check_range("seed", self.seed, 0, 2**63 - 1)
         # BasinHoppingConfig validates tolerance and max_local_searches by name.
         self.basin_hopping(self.perturbations[0])
@@ -139,10 +146,11 @@ class ExperimentConfig:
 
     def comparable(self) -> dict[str, Any]:
         """Every setting that changes results: what must match to resume an experiment or
-        add runs or p values to it. Where it runs (DDPG ``device`` and ``threads``; workers
-        and scheduler are not configuration at all) and the note do not count."""
+        add runs or p values to it. Where it runs (executor, slots, DDPG ``device`` and
+        ``threads``; workers and scheduler are not configuration at all) and the note do
+        not count: every executor gives a run the same trials."""
         out = self.to_dict()
-        for key in ("runs", "perturbations", "note"):
+        for key in ("runs", "perturbations", "note", "executor", "slots"):
             out.pop(key)
         for key in EXECUTION_ONLY_DDPG_FIELDS:
             out["ddpg"].pop(key)
@@ -241,25 +249,29 @@ def run_one(
     Returns a summary: p, run, local searches, best fitness, end reason, held_by (None
     unless the run was left to its holder).
     """
-    folder = run_dir(Path(out), p, run)
     try:
-        with exclusive_lock(folder / RUN_LOCK, wait=wait):
+        with exclusive_lock(run_lock_path(Path(out), p, run), wait=wait):
             return _run_locked(Path(out), config, p, run)
     except LockHeld as held:
         return {"p": p, "run": run, "held_by": held.holder}
 
 
-def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+def run_lock_path(out: Path, p: float, run: int) -> Path:
+    """The lock file held by the one process writing run ``(p, run)``."""
+    return run_dir(Path(out), p, run) / RUN_LOCK
+
+
+def open_run(out: Path, config: ExperimentConfig, p: float, run: int) -> BasinHoppingRun:
+    """Algorithm 2's driver of run ``(p, run)``, resumed from what is stored (call with the
+    run's lock held: a holder before us may have stored more than the caller saw)."""
     remove_temporary_files(run_dir(out, p, run))
     bh = config.basin_hopping(p)
-    state = load_run_state(out, p, run, bh)  # read under the lock: a holder before us may
-    if state is None or not state.finished:  # have stored more than the caller saw
-        search = ddpg_local_search(config.env, config.ddpg)
-        start = initial_parameters(config, p, run)
-        steps = basin_hopping_steps(search, start, bh, config.run_seed(p, run), state)
-        for current, _, optimum in steps:
-            save_step(out, p, run, current.trials, optimum)
-            state = current
+    state = load_run_state(out, p, run, bh)
+    return BasinHoppingRun(initial_parameters(config, p, run), bh, config.run_seed(p, run), state)
+
+
+def run_summary(p: float, run: int, state: RunState) -> dict[str, Any]:
+    """What an executor reports for a finished run."""
     return {
         "p": p,
         "run": run,
@@ -268,6 +280,18 @@ def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict
         "end_reason": state.end_reason,
         "held_by": None,
     }
+
+
+def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+    driver = open_run(out, config, p, run)
+    search = ddpg_local_search(config.env, config.ddpg)
+    while not driver.finished:
+        request = driver.next_search()
+        start = time.perf_counter()
+        optimum = search(request.theta, request.omega, request.seed)
+        driver.record(request, optimum, time.perf_counter() - start)
+        save_step(out, p, run, driver.state.trials, optimum)
+    return run_summary(p, run, driver.state)
 
 
 # ---------------------------------------------------------------------------- experiments
@@ -290,13 +314,20 @@ def run_experiment(
     scheduler: str | None = None,
     progress: bool = True,
     max_attempts: int = 3,
+    executor: str | None = None,
+    slots: int | None = None,
 ) -> pd.DataFrame:
     """Run every unfinished run of ``config`` into ``out``; return all trials.
 
-    ``workers`` <= 1 and no scheduler: in this process. ``workers`` > 1: that many local
-    worker processes (one torch thread each). ``scheduler``: a Dask scheduler address, or
-    ``"dask-local"`` for a LocalCluster of ``workers`` processes. A run whose worker dies is
-    retried (up to ``max_attempts``) and resumes from its last stored local search.
+    ``executor`` (default: the configuration's, ``"auto"``) picks where runs execute:
+    ``"serial"`` in this process; ``"pool"``: ``workers`` local processes (one torch thread
+    each); ``"dask"``: on ``scheduler``, a Dask scheduler address or ``"dask-local"`` for a
+    LocalCluster of ``workers`` processes; ``"lockstep"``: in this process, the local
+    searches of up to ``slots`` runs trained as one batch (:mod:`lonlib.lockstep`; on the
+    device ``config.ddpg.device``). ``"auto"``: Dask if a scheduler is given, else a pool for
+    ``workers`` > 1, else serial. Every executor gives a run the same trials. A run whose
+    worker dies is retried (up to ``max_attempts``) and resumes from its last stored local
+    search.
 
     Before any compute: ``out`` must exist or be creatable in an existing folder and accept
     files (:class:`lonlib.store.DataWriteError` otherwise; on Dask, every worker checks it
@@ -306,6 +337,9 @@ def run_experiment(
     """
     check_range("workers", workers, 1, 4096)
     check_range("max_attempts", max_attempts, 1, 1000)
+    kind = resolve_executor(executor or config.executor, workers, scheduler)
+    slots = config.slots if slots is None else slots
+    check_range("slots", slots, 1, 100_000)
     out = Path(out)
     check_output_folder(out)
     with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
@@ -330,12 +364,15 @@ def run_experiment(
             held[summary["p"], summary["run"]] = summary["held_by"]
 
     def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
+        if kind == "lockstep":
+            run_lockstep(out, config, jobs, on_done, slots, wait, lambda: _refresh(bar, out))
+            return
         execute_runs(
             partial(run_one, out, config, wait=wait),
             jobs,
             on_done,
-            workers=workers,
-            scheduler=scheduler,
+            workers=1 if kind == "serial" else workers,
+            scheduler=scheduler if kind == "dask" else None,
             max_attempts=max_attempts,
             key_prefix=config.name,
             on_tick=lambda: _refresh(bar, out),

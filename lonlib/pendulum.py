@@ -419,6 +419,17 @@ class CoupledPendulums:
         self.upright_sum[index] = 0.0
         self.end_reason[index] = EndReason.RUNNING
 
+    def select(self, index: np.ndarray | list[int]) -> CoupledPendulums:
+        """A simulator of the environments at ``index`` (repeats allowed), in that order,
+        with their current states; its generator continues this one's stream."""
+        index = np.asarray(index, dtype=np.int64)
+        out = CoupledPendulums.__new__(CoupledPendulums)
+        out.__dict__.update(self.__dict__)
+        out.batch_size = int(index.size)
+        for name in ("x", "x_dot", "phi", "phi_dot", "step_count", "upright_sum", "end_reason"):
+            setattr(out, name, getattr(self, name)[index].copy())
+        return out
+
     def observe(self) -> FloatArray:
         """Normalised Table I sensors of every environment, ``[B, 10 n]``."""
         return sensors(self.config, self.x, self.x_dot, self.phi, self.phi_dot)
@@ -537,14 +548,19 @@ def evaluate(
     config: PendulumConfig,
     batch_size: int = 1,
     seed: int | np.random.Generator | None = None,
+    same_start: bool = False,
 ) -> Evaluation:
     """Fitness (Algorithm 1) of a deterministic policy run in ``batch_size`` environments.
 
     ``policy`` maps normalised sensors ``[B, 10 n]`` to actions ``[B, n]``; a batch of
     different policies is a single callable that evaluates row ``b`` with policy ``b``.
-    ``seed`` draws the initial-state noise (if any). Stops as soon as every environment ended.
+    ``seed`` draws the initial-state noise (if any); with ``same_start`` every environment
+    starts from the state a batch of one would draw (so a row scores what it scores alone).
+    Stops as soon as every environment ended.
     """
-    sim = CoupledPendulums(config, batch_size, seed)
+    sim = CoupledPendulums(config, 1 if same_start else batch_size, seed)
+    if same_start and batch_size > 1:
+        sim = sim.select(np.zeros(batch_size, dtype=np.int64))
     episode_return = np.zeros(sim.batch_size)
     while not sim.done.all():
         episode_return += sim.step(policy(sim.observe())).reward

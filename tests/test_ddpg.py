@@ -16,6 +16,7 @@ from lonlib.ddpg import (
 )
 from lonlib.nets import actor_spec, critic_spec, forward_numpy
 from lonlib.pendulum import PendulumConfig, StepResult, evaluate
+from lonlib.random_streams import EXPLORATION_NOISE, CounterStreams
 from tests.ddpg_reference import lonlib_updates, reference_updates
 
 SMALL = {"batch_size": 64, "buffer_size": 2000, "warmup_steps": 100, "min_steps": 0}
@@ -161,11 +162,12 @@ def test_only_a_true_end_is_stored_as_terminal_and_truncation_bootstraps():
 
 
 def test_exploration_noise_has_the_configured_standard_deviation_and_is_clipped():
-    rngs = [np.random.default_rng(i) for i in range(4000)]
-    actions = exploration_actions(np.full((4000, 2), 0.5), rngs, 0.1)
+    streams = CounterStreams(list(range(4000)))
+    noise = streams.normal(EXPLORATION_NOISE, np.zeros(4000, dtype=np.int64), 2)
+    actions = exploration_actions(torch.full((4000, 2), 0.5), noise, 0.1).numpy()
     assert np.std(actions - 0.5) == pytest.approx(0.1, rel=0.05)
     assert abs(np.mean(actions - 0.5)) < 0.01
-    edge = exploration_actions(np.full((4000, 1), 0.99), rngs, 0.1)
+    edge = exploration_actions(torch.full((4000, 2), 0.99), noise, 0.1).numpy()
     assert edge.max() == 1.0 and (edge <= 1.0).all() and (edge < 0.99).any()
 
 

@@ -1,0 +1,153 @@
+"""The lockstep executor: the local searches of many basin-hopping runs trained as one batch.
+
+One process holds a :class:`lonlib.ddpg.SlotTrainer` of ``K`` slots. Each slot trains the
+current local search of one run; all ``K`` step and update together (one batched matrix
+product per layer). When a slot's search ends, Algorithm 2 accepts or rejects it for its run
+at once (:class:`lonlib.basin_hopping.BasinHoppingRun`), the trial is stored, and the slot is
+refilled with that run's next search, or with the next pending run once the run has ended
+(continuous batching): the batch stays full while work is pending; once it runs out, the
+batch sheds finished slots (:meth:`~lonlib.ddpg.SlotTrainer.shrink`).
+
+Every random number a search draws comes from its own ``(run seed, trial)`` streams and no
+reduction mixes slots, so a run's trials do not depend on ``K``, on its slot, or on the runs
+sharing the batch: on the CPU they are bit for bit the serial executor's (tested). Storage
+is the other executors' (:func:`lonlib.store.save_step` after every search, each run's lock
+held while it is in the batch): a killed lockstep experiment resumes and loses at most the
+searches in flight.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lonlib.basin_hopping import BasinHoppingRun, SearchRequest, local_optimum
+from lonlib.ddpg import SlotTrainer
+from lonlib.lock import LockHeld, exclusive_lock
+from lonlib.store import save_step
+from lonlib.validation import check_range
+
+Job = tuple[float, int]
+
+
+@dataclass
+class _Run:
+    """A run in the batch: its Algorithm 2 driver, the search it waits for, its lock."""
+
+    p: float
+    run: int
+    driver: BasinHoppingRun
+    lock: ExitStack
+    request: SearchRequest | None = None
+
+
+def run_lockstep(
+    out: str | Path,
+    config: Any,
+    jobs: Sequence[Job],
+    on_done: Callable[[dict[str, Any]], None],
+    slots: int,
+    wait: bool = False,
+    on_tick: Callable[[], None] | None = None,
+    tick_seconds: float = 5.0,
+) -> None:
+    """Run (or resume) the runs ``jobs`` of experiment ``config`` in ``out`` through one
+    lockstep batch of at most ``slots`` local searches.
+
+    ``on_done(summary)`` is called as each run ends (the summary of
+    :func:`lonlib.experiment.run_summary`), and for a run another process holds, at once
+    with ``held_by`` naming the holder (unless ``wait``: then its lock is waited for).
+    ``on_tick()`` runs every ``tick_seconds`` for progress displays.
+    """
+    from lonlib.experiment import open_run, run_lock_path, run_summary
+
+    check_range("slots", slots, 1, 100_000)
+    if config.ddpg.update != "lean":
+        raise ValueError(
+            f"the lockstep executor needs ddpg.update='lean' (slot refills), "
+            f"got {config.ddpg.update!r}"
+        )
+    out = Path(out)
+    pending: deque[Job] = deque(jobs)
+    active: dict[Job, _Run] = {}
+
+    def open_next() -> _Run | None:
+        """The next pending run that still needs a search, locked; None when none is left."""
+        while pending:
+            p, run = pending.popleft()
+            lock = ExitStack()
+            try:
+                lock.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=wait))
+            except LockHeld as held:
+                on_done({"p": p, "run": run, "held_by": held.holder})
+                continue
+            try:
+                driver = open_run(out, config, p, run)
+            except BaseException:
+                lock.close()
+                raise
+            if driver.finished:
+                lock.close()
+                on_done(run_summary(p, run, driver.state))
+                continue
+            return _Run(p, run, driver, lock)
+        return None
+
+    def ask(run: _Run) -> _Run:
+        run.request = run.driver.next_search()
+        active[run.p, run.run] = run
+        return run
+
+    try:
+        first = []
+        while len(first) < slots and (run := open_next()) is not None:
+            first.append(ask(run))
+        if not first:
+            return
+        trainer = SlotTrainer(
+            np.stack([r.request.theta for r in first]),
+            np.stack([r.request.omega for r in first]),
+            [r.request.seed for r in first],
+            config.env,
+            config.ddpg,
+            tags=[(r.p, r.run) for r in first],
+        )
+        last_tick = time.monotonic()
+        while trainer.busy.any():
+            refill: list[_Run] = []
+            for tag, result in trainer.step():
+                run = active[tag]
+                optimum = local_optimum(result, config.env, config.ddpg)
+                run.driver.record(run.request, optimum, result.seconds)
+                save_step(out, run.p, run.run, run.driver.state.trials, optimum)
+                if run.driver.finished:
+                    del active[tag]
+                    run.lock.close()
+                    on_done(run_summary(run.p, run.run, run.driver.state))
+                    run = open_next()
+                    if run is None:
+                        continue
+                refill.append(ask(run))
+            if refill:
+                trainer.start(
+                    trainer.free_slots()[: len(refill)],
+                    np.stack([r.request.theta for r in refill]),
+                    np.stack([r.request.omega for r in refill]),
+                    [r.request.seed for r in refill],
+                    [(r.p, r.run) for r in refill],
+                )
+            elif not pending and trainer.busy.sum() * 2 <= trainer.slots:
+                trainer.shrink()
+            if on_tick is not None and time.monotonic() - last_tick >= tick_seconds:
+                on_tick()
+                last_tick = time.monotonic()
+    finally:
+        for run in active.values():
+            run.lock.close()
