@@ -104,7 +104,8 @@ def test_a_flat_quick_sized_experiment_is_not_testable(tmp_path):
 
 
 def test_claim_a_needs_several_typical_levels(tmp_path):
-    one_level = [(0.40,)] * 28 + [(0.10,), (0.90,)]
+    # three stray sinks are detected peaks, but one sink each: no typical optimum
+    one_level = [(0.40,)] * 12 + [(0.10,), (0.70,), (0.90,)]
     table = paper_claims(write_experiment(tmp_path / "x", {1e-4: one_level}))
     row = table.set_index("claim").loc["a"]
     assert row["verdict"] == NOT_REPRODUCED and row["statistic"] == 1
@@ -132,6 +133,13 @@ def test_claim_c_points_from_1e_4_to_1e_3(tmp_path):
     assert row["verdict"] == NOT_REPRODUCED
     assert row["p_value"] > 0.5 and row["effect"] == pytest.approx(-420 / 900)
     assert row["ci_high"] < 0
+    # significant one-sided, but the bootstrap interval of Cliff's delta reaches 0
+    borderline = write_experiment(
+        tmp_path / "borderline", {1e-3: [(0.32,)] * 3 + [(0.46,)] * 5, 1e-4: [(0.46,)] * 8}
+    )
+    row = paper_claims(borderline).set_index("claim").loc["c"]
+    assert row["p_value"] < 0.05 and row["ci_low"] <= 0 < row["effect"]
+    assert row["verdict"] == NOT_REPRODUCED
     one_p = paper_claims(write_experiment(tmp_path / "one", {1e-4: PAPER_LIKE}))
     row = one_p.set_index("claim").loc["c"]
     assert row["verdict"] == NOT_TESTABLE and "stored: 0.0001" in row["evidence"]
@@ -182,6 +190,9 @@ def test_cliffs_delta_and_the_one_sided_test():
     assert bootstrap_delta_ci(high, low, 200, 0.95, 0) == bootstrap_delta_ci(
         high, low, 200, 0.95, 0
     )
+    # a percentile interval stays within delta's range [-1, 1] even when skewed at its edge
+    nine = compare_greater(np.r_[np.ones(9), 0.0], np.zeros(10), resamples=300)
+    assert nine.delta == 0.9 and nine.ci_low <= 0.9 <= nine.ci_high <= 1.0
 
 
 def test_markdown_rendering(paper_like):
