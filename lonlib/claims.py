@@ -44,9 +44,10 @@ PAPER_P_LARGE = 1e-3
 ALPHA = 0.05
 """Significance level of the one-sided tests of claims c and e."""
 MIN_RUNS_PER_P = 5
-"""Claim c needs at least this many runs at each of the two p values: with fewer, the
-one-sided Mann-Whitney U test cannot reach ALPHA even when every run of one p beats every
-run of the other (4 against 4 gives p = 0.014 at best, 3 against 3 only 0.05)."""
+"""Claim c needs at least this many runs at each of the two p values: 3 runs against 3
+cannot reach ALPHA with the one-sided Mann-Whitney U test at all (p = 1/20 at best), 4
+against 4 only when every run of one p beats every run of the other (p = 1/70); from 5
+runs per p a few overlapping runs still leave room for significance (the paper ran 100)."""
 MIN_SINKS = 10
 """Claims a and b need at least this many sinks (one per run) at the examined p: a
 histogram of fewer values shows where single runs ended, not a distribution."""

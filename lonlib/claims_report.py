@@ -11,6 +11,8 @@ from lonlib.store import p_label
 
 CLAIM_COLUMNS = {"claim": "claim", "paper": "the paper says", "evidence": "evidence"}
 PEAK_COLUMNS = ("paper_peak", "nearest_detected", "distance")
+README_BEGIN = "<!-- claims:begin (lonlib analyse data/reference --readme README.md) -->"
+README_END = "<!-- claims:end -->"
 
 
 def cell(value: object) -> str:
@@ -68,3 +70,15 @@ def write_claims(claims: pd.DataFrame, peaks: pd.DataFrame | None, out: str | Pa
     claims.to_csv(csv, index=False)
     md.write_text(claims_markdown(claims, peaks), encoding="utf-8")
     return [csv, md]
+
+
+def splice_readme(readme: str, markdown: str, source: str) -> str:
+    """``readme`` with the text between :data:`README_BEGIN` and :data:`README_END`
+    replaced by ``markdown`` and a line naming the experiment folder ``source`` it came
+    from, so the README's claims table is generated, never typed."""
+    if readme.count(README_BEGIN) != 1 or readme.count(README_END) != 1:
+        raise ValueError(f"the README must hold {README_BEGIN!r} and {README_END!r} once each")
+    head, rest = readme.split(README_BEGIN)
+    _, tail = rest.split(README_END)
+    body = f"*Generated from `{source}` by `lonlib analyse`.*\n\n{markdown.strip()}"
+    return f"{head}{README_BEGIN}\n{body}\n{README_END}{tail}"

@@ -22,7 +22,7 @@ from lonlib.claims import (
     paper_claims,
     peaks_beside_paper,
 )
-from lonlib.claims_report import claims_markdown, markdown_table
+from lonlib.claims_report import README_BEGIN, README_END, claims_markdown, markdown_table
 from lonlib.effect_size import bootstrap_delta_ci, cliffs_delta, compare_greater
 from lonlib.experiment import ExperimentConfig
 from lonlib.store import read_experiment_trials, save_step, write_json
@@ -238,7 +238,9 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
 
     folder = write_experiment(tmp_path / "exp", {1e-3: WORSE[:6], 1e-4: PAPER_LIKE[::3]})
     before = hashes(folder)
-    main(["analyse", str(folder)])
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{README_BEGIN}\nold table\n{README_END}\noutro\n")
+    main(["analyse", str(folder), "--readme", str(readme)])
     after = hashes(folder)
     assert {k: v for k, v in after.items() if not k.startswith("figures/")} == before
     figures = folder / "figures"
@@ -249,6 +251,10 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
     trials = read_experiment_trials(folder)
     expected = claims_markdown(claims_from_trials(trials), peaks_beside_paper(trials))
     assert (figures / "claims.md").read_text() == expected
+    pasted = readme.read_text()
+    assert pasted.startswith(f"intro\n{README_BEGIN}\n*Generated from `{folder}`")
+    assert expected.strip() in pasted and "old table" not in pasted
+    assert pasted.endswith(f"{expected.strip()}\n{README_END}\noutro\n")
     assert "written to" in capsys.readouterr().out
 
 
@@ -266,6 +272,19 @@ def test_the_analysis_only_command_refuses_a_folder_without_an_experiment(tmp_pa
         main(["analyse", str(empty)])
     assert f"{empty} holds no finished local search" in capsys.readouterr().err
     assert not (empty / "figures").exists()
+    no_markers = tmp_path / "README.md"
+    no_markers.write_text("no markers here\n")
+    with pytest.raises(SystemExit):
+        main(
+            [
+                "analyse",
+                str(write_experiment(tmp_path / "x", {1e-4: [(0.5,)]})),
+                "--readme",
+                str(no_markers),
+            ]
+        )
+    assert "must hold" in capsys.readouterr().err
+    assert not (tmp_path / "x" / "figures").exists()  # refused before any work
 
 
 def test_make_figures_runs_the_analysis_only_command():
