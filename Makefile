@@ -9,13 +9,14 @@ CONFIG    ?= quick
 WORKERS   ?= 2
 SCHEDULER ?=
 OUT       ?= data/$(basename $(notdir $(CONFIG)))
+EXPERIMENT ?= data/reference
 # papermill with an encrypted kernel connection and the kernel's stderr (progress) shown here
 PAPERMILL := $(BIN)/python -m lonlib.notebook_run --log-level WARNING --no-progress-bar
 # The browser test runs in `make test` when Chromium and chromedriver are installed.
 CHROMIUM  := $(shell for b in chromium chromium-browser google-chrome; do command -v $$b && break; done)
 BROWSER_TEST := $(if $(and $(CHROMIUM),$(shell command -v chromedriver 2>/dev/null)),yes)
 
-.PHONY: help setup test test-browser bench lab lint format clean reproduce mutants
+.PHONY: help setup test test-browser bench lab lint format clean reproduce figures mutants
 
 help:
 	@echo "make setup   create $(VENV) and install lonlib with its dev extra (idempotent)"
@@ -25,6 +26,8 @@ help:
 	@echo "make bench   set up, then run the benchmarks (writes benchmarks/results/*.json)"
 	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
 	@echo "             sample the LON for every p, analyse it and record optima (resumes)"
+	@echo "make figures [EXPERIMENT=data/reference]  every figure and table of a stored"
+	@echo "             experiment again, with the paper's claims tested (never samples)"
 	@echo "make lab     set up, then start JupyterLab on the project (opens at notebooks/)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check"
@@ -98,8 +101,14 @@ reproduce: setup
 	echo "\nDone in $$(( $$(date +%s) - start )) s. Results under $(OUT)/:"; \
 	echo "  figures/      Fig. 2 boxplot, Fig. 3 3-D LON (.png, .html), Figs. 4-5 histograms,"; \
 	echo "                metrics.csv (LON metrics per p), peaks.csv (peaks beside the paper's)"; \
+	echo "                claims.md, claims.csv (the paper's claims tested: evidence and verdicts)"; \
 	echo "  recordings/   rerun .rrd files: view with  $(BIN)/rerun $(OUT)/recordings/<file>.rrd"; \
 	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
+
+# Analysis only: figures, tables and the claims table from stored runs (lonlib.analysis, the
+# code the analyse_lon notebook runs); refuses a folder without an experiment.
+figures: setup
+	$(BIN)/lonlib analyse $(EXPERIMENT)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info

@@ -18,6 +18,8 @@ import pandas as pd
 
 from lonlib.behaviour import descriptors_of
 from lonlib.behaviour_lon import behaviour_table, behavioural_lon
+from lonlib.claims import claims_from_trials, peaks_beside_paper
+from lonlib.claims_report import write_claims
 from lonlib.experiment import ExperimentConfig
 from lonlib.lon import build_lon, node_id, sinks
 from lonlib.lon_metrics import lon_metrics
@@ -34,7 +36,7 @@ from lonlib.record import record, recording_name
 from lonlib.store import (
     optimum_path,
     p_label,
-    read_experiment_trials,
+    read_finished_trials,
     read_manifest,
     read_optimum,
 )
@@ -43,11 +45,8 @@ from lonlib.store import (
 def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
     """The stored configuration and all trials of an experiment folder."""
     folder = Path(folder)
-    config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
-    trials = read_experiment_trials(folder)
-    if trials.empty:
-        raise ValueError(f"{folder} holds no finished local search yet")
-    return config, trials
+    trials = read_finished_trials(folder)
+    return ExperimentConfig.from_mapping(read_manifest(folder)["config"]), trials
 
 
 @dataclass
@@ -59,6 +58,8 @@ class Analysis:
     peaks: pd.DataFrame
     behaviours: pd.DataFrame = field(default_factory=pd.DataFrame)  # typical behaviours per p
     behavioural_metrics: pd.DataFrame = field(default_factory=pd.DataFrame)
+    claims: pd.DataFrame = field(default_factory=pd.DataFrame)  # the paper's claims, verdicts
+    claim_peaks: pd.DataFrame = field(default_factory=pd.DataFrame)  # peaks at the claims' p
     files: list[Path] = field(default_factory=list)
     figures: dict[str, plt.Figure] = field(default_factory=dict)
     interactive: dict[str, Any] = field(default_factory=dict)
@@ -71,8 +72,10 @@ def analyse(
     bins: int = 50,
     close_figures: bool = False,
 ) -> Analysis:
-    """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, and
-    a sensitivity view when more than two p values are present.
+    """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, the
+    paper's claims tested (``claims.csv``, ``claims.md``: :mod:`lonlib.claims`), and a
+    sensitivity view when more than two p values are present. Reads the stored runs and
+    writes only under ``<folder>/figures/``.
 
     ``close_figures`` closes each matplotlib figure once saved (it stays in the result and
     can still be displayed), so a notebook's inline backend does not show every figure at
@@ -138,6 +141,9 @@ def analyse(
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
+    result.claims = claims_from_trials(trials, bins, tolerance)
+    result.claim_peaks = peaks_beside_paper(trials, bins, tolerance)
+    result.files += write_claims(result.claims, result.claim_peaks, out)
     if trials["p"].nunique() > 2:
         save("sensitivity", sensitivity(result.metrics))
     return result

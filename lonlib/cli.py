@@ -1,5 +1,5 @@
 """The ``lonlib`` command: run experiments, see their status, build and export their LONs,
-calibrate the physics."""
+analyse a stored experiment (figures, tables, the paper's claims), calibrate the physics."""
 
 from __future__ import annotations
 
@@ -62,6 +62,28 @@ def _lon(args: argparse.Namespace) -> None:
     print(f"metrics, GraphML and trace files written to {out}")
 
 
+def _analyse(args: argparse.Namespace) -> None:
+    from lonlib.analysis import analyse
+    from lonlib.claims_report import claims_markdown, splice_readme
+
+    readme = Path(args.readme) if args.readme else None
+    if readme is not None:  # refuse a README without the markers before any work
+        if not readme.is_file():
+            raise ValueError(f"--readme {readme}: no such file")
+        splice_readme(readme.read_text(), "", args.dir)
+    result = analyse(
+        args.dir, seed=args.seed, tolerance=args.tolerance, bins=args.bins, close_figures=True
+    )
+    verdicts = result.claims[["claim", "verdict", "evidence"]]
+    with pd.option_context("display.width", 200, "display.max_colwidth", 120):
+        print(verdicts.to_string(index=False))
+    print(f"{len(result.files)} figures and tables written to {Path(args.dir) / 'figures'}")
+    if readme is not None:
+        table = claims_markdown(result.claims, result.claim_peaks)
+        readme.write_text(splice_readme(readme.read_text(), table, args.dir), encoding="utf-8")
+        print(f"claims table pasted into {readme}")
+
+
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import load_calibration, run_calibration, with_overrides
 
@@ -98,6 +120,19 @@ def build_parser() -> argparse.ArgumentParser:
     lon.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality tolerance")
     lon.add_argument("--out", help="export folder (default DIR/lon)")
     lon.set_defaults(func=_lon)
+
+    analysis = sub.add_parser(
+        "analyse",
+        help="figures, tables and the paper's claims from a stored experiment (no sampling)",
+    )
+    analysis.add_argument("dir", help="experiment folder, e.g. data/reference")
+    analysis.add_argument("--seed", type=int, default=0, help="layout seed of the 3-D LON")
+    analysis.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality")
+    analysis.add_argument("--bins", type=int, default=50, help="histogram bins on [0, 1]")
+    analysis.add_argument(
+        "--readme", help="also paste the claims table between the claims markers of this file"
+    )
+    analysis.set_defaults(func=_analyse)
 
     calibrate = sub.add_parser(
         "calibrate", help="run (or resume) the physics calibration study into OUT"

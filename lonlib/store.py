@@ -309,3 +309,14 @@ def read_experiment_trials(root: Path) -> pd.DataFrame:
         return pd.DataFrame(columns=TRIAL_COLUMNS)
     table = pd.concat([read_trials(path) for path in paths], ignore_index=True)
     return table.sort_values(["p", "run", "index"], ignore_index=True)
+
+
+def read_finished_trials(root: Path) -> pd.DataFrame:
+    """:func:`read_experiment_trials` of a folder that must hold an experiment with at least
+    one finished local search: MissingExperimentError (no manifest) or ValueError otherwise,
+    both naming the folder."""
+    read_manifest(root)
+    trials = read_experiment_trials(root)
+    if trials.empty:
+        raise ValueError(f"{root} holds no finished local search yet")
+    return trials

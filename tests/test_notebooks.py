@@ -86,6 +86,12 @@ def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_pa
         out for out in outputs(executed) if "application/vnd.plotly.v1+json" in out.get("data", {})
     ]
     assert len(plots) == 2  # the interactive 3-D LON of each p
+    tables = [
+        "".join(out["data"]["text/markdown"])  # a string or a list of lines
+        for out in outputs(executed)
+        if "text/markdown" in out.get("data", {})
+    ]
+    assert len(tables) == 1 and tables[0].startswith("| claim | the paper says |")  # claims
     for name in (
         "fig2_optima_boxplot.png",
         "fig3_lon_p=0.0001.png",
@@ -94,6 +100,8 @@ def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_pa
         "fig5_optima_p=0.001.png",
         "metrics.csv",
         "peaks.csv",
+        "claims.csv",
+        "claims.md",
     ):
         assert (data / "figures" / name).stat().st_size > 0, name
 
