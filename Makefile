@@ -8,6 +8,9 @@ TORCH  := torch==2.13.0
 CONFIG    ?= quick
 WORKERS   ?= 2
 SCHEDULER ?=
+EXECUTOR  ?=
+SLOTS     ?=
+DEVICE    ?=
 OUT       ?= data/$(basename $(notdir $(CONFIG)))
 EXPERIMENT ?= data/reference
 # papermill with an encrypted kernel connection and the kernel's stderr (progress) shown here
@@ -25,6 +28,7 @@ help:
 	@echo "make test-browser  JupyterLab driven in headless Chromium (tests/test_browser.py)"
 	@echo "make bench   set up, then run the benchmarks (writes benchmarks/results/*.json)"
 	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
+	@echo "             [EXECUTOR=serial|pool|dask|lockstep] [SLOTS=16] [DEVICE=cpu|cuda]"
 	@echo "             sample the LON for every p, analyse it and record optima (resumes)"
 	@echo "make figures [EXPERIMENT=data/reference]  every figure and table of a stored"
 	@echo "             experiment again, with the paper's claims tested (never samples)"
@@ -84,13 +88,11 @@ lab: $(VENV)/.lab-installed
 reproduce: setup
 	@mkdir -p $(OUT)/notebooks
 	@start=$$(date +%s); \
-	for p in $$($(BIN)/python -c "from lonlib.experiment import load_config; \
-	    print(*load_config('$(CONFIG)').perturbations)"); do \
-	  echo "== sampling p=$$p ($(CONFIG), $(WORKERS) workers$(if $(SCHEDULER), on $(SCHEDULER)))"; \
-	  $(PAPERMILL) notebooks/sample_lon.ipynb $(OUT)/notebooks/sample_lon_p=$$p.ipynb \
-	    -r config "$(CONFIG)" -p p $$p -p workers $(WORKERS) -r scheduler "$(SCHEDULER)" \
-	    -r out "$(OUT)" || exit 1; \
-	done; \
+	echo "== sampling every p of $(CONFIG) (executor $(or $(EXECUTOR),auto), $(WORKERS) workers$(if $(SCHEDULER), on $(SCHEDULER))$(if $(SLOTS), $(SLOTS) slots)$(if $(DEVICE), on $(DEVICE)))"; \
+	$(PAPERMILL) notebooks/sample_lon.ipynb $(OUT)/notebooks/sample_lon.ipynb \
+	  -r config "$(CONFIG)" -p p 0 -p workers $(WORKERS) -r scheduler "$(SCHEDULER)" \
+	  -r executor "$(EXECUTOR)" -p slots $(or $(SLOTS),0) -r device "$(DEVICE)" \
+	  -r out "$(OUT)" || exit 1; \
 	echo "== analysis"; \
 	$(PAPERMILL) notebooks/analyse_lon.ipynb $(OUT)/notebooks/analyse_lon.ipynb \
 	  -r experiment_dir "$(OUT)" || exit 1; \

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from lonlib.executors import EXECUTORS
 from lonlib.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
 
 
@@ -22,11 +23,19 @@ def _run(args: argparse.Namespace) -> None:
         changes["perturbations"] = tuple(args.p)
     if args.runs is not None:
         changes["runs"] = args.runs
+    if args.device:
+        changes["ddpg"] = dataclasses.replace(config.ddpg, device=args.device)
     if changes:
         config = dataclasses.replace(config, **changes)  # validated again on construction
     out = Path(args.out) if args.out else Path("data") / config.name
     trials = run_experiment(
-        config, out, workers=args.workers, scheduler=args.scheduler, progress=not args.quiet
+        config,
+        out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.quiet,
+        executor=args.executor,
+        slots=args.slots,
     )
     print(f"{len(trials)} local searches stored under {out}")
 
@@ -106,6 +115,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--runs", type=int, help="runs per p (override)")
     run.add_argument("--workers", type=int, default=1, help="local worker processes")
     run.add_argument("--scheduler", help="Dask scheduler address, or 'dask-local'")
+    run.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        help="where runs execute (default: the configuration's, 'auto': Dask with a "
+        "scheduler, a pool with --workers > 1, else serial; 'lockstep': the local searches "
+        "of many runs trained as one batch in this process)",
+    )
+    run.add_argument("--slots", type=int, help="local searches per lockstep batch")
+    run.add_argument("--device", help="torch device of DDPG, e.g. 'cpu' or 'cuda'")
     run.add_argument("--out", help="output folder (default data/<name>)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)

@@ -217,7 +217,7 @@ def local_search_batch(
     while trainer.busy.any():
         for tag, result in trainer.step():
             results[tag] = result
-        if trainer.busy.sum() * 2 <= trainer.slots:
+        if not trainer.busy.all():
             trainer.shrink()
         if progress and int(trainer.steps.max()) % 500 == 0:
             bar.update(500)

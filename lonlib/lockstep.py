@@ -143,7 +143,7 @@ def run_lockstep(
                     [r.request.seed for r in refill],
                     [(r.p, r.run) for r in refill],
                 )
-            elif not pending and trainer.busy.sum() * 2 <= trainer.slots:
+            elif not pending and not trainer.busy.all():
                 trainer.shrink()
             if on_tick is not None and time.monotonic() - last_tick >= tick_seconds:
                 on_tick()

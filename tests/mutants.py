@@ -36,8 +36,12 @@ class Mutant:
 
 DDPG, BH, SIM = "lonlib/ddpg.py", "lonlib/basin_hopping.py", "lonlib/pendulum.py"
 LEAN, AUTOGRAD = "lonlib/ddpg_update.py", "lonlib/ddpg_autograd.py"
+REPLAY, STREAMS, LOCKSTEP = "lonlib/replay.py", "lonlib/random_streams.py", "lonlib/lockstep.py"
 GUARDS = {
-    DDPG: ["tests/test_ddpg.py"],
+    DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
+    REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
+    STREAMS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
+    LOCKSTEP: ["tests/test_lockstep.py"],
     LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
@@ -104,64 +108,99 @@ MUTANTS = [
         "critic_loss = (q - target).abs().mean(dim=(1, 2))",
         "autograd: critic loss is not the squared error",
     ),
-    # --- DDPG: replay and exploration
+    # --- DDPG: replay, exploration and the per-agent streams
     Mutant(
-        DDPG,
+        REPLAY,
         "self.add(obs, actions, outcome.reward, next_obs, outcome.terminated)",
         "self.add(obs, actions, outcome.reward, next_obs, outcome.terminated | outcome.truncated)",
         "truncations stored as terminations",
     ),
-    Mutant(DDPG, "row[:, -1] = ~terminated", "row[:, -1] = terminated", "not_done inverted"),
+    Mutant(REPLAY, "row[:, -1] = ~terminated", "row[:, -1] = terminated", "not_done inverted"),
     Mutant(
-        DDPG,
+        REPLAY,
         "row[:, o + a + 1 : 2 * o + a + 1] = next_obs",
         "row[:, o + a + 1 : 2 * o + a + 1] = obs",
         "next state not stored",
     ),
     Mutant(
+        REPLAY,
+        "self.position[agent] = self.size[agent] = 0",
+        "self.position[agent] = 0",
+        "a refilled slot samples the previous search's transitions",
+    ),
+    Mutant(
         DDPG,
-        "noise = np.stack([rng.normal(0.0, noise_std, mu.shape[1]) for rng in rngs])",
-        "noise = np.stack([rng.normal(0.0, noise_std**2, mu.shape[1]) for rng in rngs])",
+        "return torch.clamp(mu.to(torch.float64) + noise_std * noise, 0.0, 1.0)",
+        "return torch.clamp(mu.to(torch.float64) + noise_std**2 * noise, 0.0, 1.0)",
         "noise_std read as a variance",
     ),
     Mutant(
         DDPG,
-        "return np.clip(mu + noise, 0.0, 1.0)",
-        "return mu + noise",
+        "return torch.clamp(mu.to(torch.float64) + noise_std * noise, 0.0, 1.0)",
+        "return mu.to(torch.float64) + noise_std * noise",
         "actions not clipped",
+    ),
+    Mutant(
+        DDPG,
+        "REPLAY_SAMPLES, self.steps, hp.batch_size, self.replay.size",
+        "REPLAY_SAMPLES, self.updates, hp.batch_size, self.replay.size",
+        "replay samples drawn by another counter than the slot's step (K-dependent)",
+    ),
+    Mutant(
+        STREAMS,
+        "self.seeds[agent] = check_seed(seed)",
+        "self.seeds[agent] = check_seed(seed) + agent",
+        "a slot's stream depends on the slot",
+    ),
+    # --- DDPG: lockstep slots
+    Mutant(
+        DDPG,
+        "for slot in np.flatnonzero(training & (self.updates == 0) & self.dirty):",
+        "for slot in np.flatnonzero(training & (self.updates == 0) & ~self.dirty):",
+        "a slot touched during its warm-up is not restored to its start",
+    ),
+    Mutant(
+        DDPG,
+        "            self.dirty |= ~training\n",
+        "",
+        "updates during the warm-up are kept",
+    ),
+    Mutant(
+        DDPG,
+        "self.learner = self.learner.select(keep)",
+        "self.learner = self.learner.select(keep[::-1])",
+        "shrinking mixes up the slots' learners",
+    ),
+    Mutant(
+        LOCKSTEP,
+        "trainer.free_slots()[: len(refill)],",
+        "trainer.free_slots()[::-1][: len(refill)],",
+        "refills land in slots that are still busy",
     ),
     # --- DDPG: what F returns
     Mutant(
         DDPG,
-        "                    results[i].theta = flat_actor[i].copy()\n"
-        "                    results[i].omega = flat_critic[i].copy()\n"
-        "                    last_improvement[i] = step",
-        "                    results[i].theta = thetas[i].copy()\n"
-        "                    results[i].omega = flat_critic[i].copy()\n"
-        "                    last_improvement[i] = step",
+        "                        search.result.theta = flat_actor[slot].copy()\n",
+        "                        search.result.theta = search.theta.copy()\n",
         "start Actor returned with the trained fitness",
     ),
     Mutant(
         DDPG,
-        "                    results[i].theta = flat_actor[i].copy()\n"
-        "                    results[i].omega = flat_critic[i].copy()\n"
-        "                    last_improvement[i] = step",
-        "                    results[i].theta = flat_actor[i].copy()\n"
-        "                    results[i].omega = omegas[i].copy()\n"
-        "                    last_improvement[i] = step",
+        "                        search.result.omega = flat_critic[slot].copy()\n",
+        "                        search.result.omega = search.omega.copy()\n",
         "start Critic returned",
     ),
     Mutant(DDPG, "count_start: bool = False", "count_start: bool = True", "start counted"),
     Mutant(
         DDPG,
-        "candidate = hp.count_start or updates > 0",
-        "candidate = True",
+        "candidate = trained | hp.count_start",
+        "candidate = trained | True",
         "warm-up evaluations counted",
     ),
     Mutant(
         DDPG,
-        "scores = list(start_scores) if hp.count_start else [no_candidate] * k",
-        "scores = list(start_scores)",
+        "best = score if counted else (-np.inf, -np.inf)",
+        "best = score",
         "start's score kept as the bar to beat",
     ),
     Mutant(
@@ -172,40 +211,40 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "if step >= hp.warmup_steps:\n            indices",
-        "if step > hp.warmup_steps:\n            indices",
+        "training = busy & (self.steps >= hp.warmup_steps)",
+        "training = busy & (self.steps > hp.warmup_steps)",
         "one update fewer",
     ),
     Mutant(
         DDPG,
-        "                    last_improvement[i] = step\n",
+        "                    self.last_improvement[slot] = self.steps[slot]\n",
         "",
         "patience never reset by an improvement",
     ),
     Mutant(
         DDPG,
-        "last_improvement = np.full(k, hp.warmup_steps, dtype=np.int64)",
-        "last_improvement = np.zeros(k, dtype=np.int64)",
+        "self.last_improvement[index] = self.hp.warmup_steps",
+        "self.last_improvement[index] = 0",
         "patience window opens at step 0",
     ),
     Mutant(
         DDPG,
-        "stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)",
-        "stale = step - last_improvement >= hp.patience_steps",
+        "stale = (self.steps >= hp.min_steps) & (",
+        "stale = (self.steps >= 0) & (",
         "min_steps ignored",
     ),
     Mutant(
         DDPG,
-        "stale = (step >= hp.min_steps) & (step - last_improvement >= hp.patience_steps)",
-        "stale = (step >= hp.min_steps) & (step - last_improvement > hp.patience_steps)",
+        "self.steps - self.last_improvement >= hp.patience_steps",
+        "self.steps - self.last_improvement > hp.patience_steps",
         "patience off by one",
     ),
     Mutant(
         DDPG,
-        "                results[i].omega = flat_critic[i].copy()\n"
-        "                results[i].final_evaluation = True",
-        "                results[i].omega = omegas[i].copy()\n"
-        "                results[i].final_evaluation = True",
+        "                result.omega = flat_critic[slot].copy()\n"
+        "                result.final_evaluation = True",
+        "                result.omega = self.searches[slot].omega.copy()\n"
+        "                result.final_evaluation = True",
         "final evaluation returns the start Critic",
     ),
     # --- Algorithm 2
@@ -241,7 +280,7 @@ MUTANTS = [
     ),
     Mutant(
         BH,
-        "omega = perturb(state.incumbent.omega, config.perturbation, rng)",
+        "omega = perturb(state.incumbent.omega, self.config.perturbation, rng)",
         "omega = state.incumbent.omega",
         "critic not perturbed",
     ),

@@ -1,5 +1,6 @@
 """The lockstep executor: the same trials as the serial executor, whatever the batch."""
 
+import dataclasses
 import hashlib
 
 import numpy as np
@@ -71,3 +72,84 @@ def test_lockstep_trials_equal_the_serial_executors_bit_for_bit(serial, tmp_path
             pd.testing.assert_frame_equal(value, want_digest[key], check_exact=True)
         else:
             assert value == want_digest[key], key
+
+
+def test_a_killed_lockstep_experiment_resumes_to_the_same_trials(serial, tmp_path, monkeypatch):
+    import lonlib.lockstep
+
+    stored_steps = []
+    save = lonlib.lockstep.save_step
+
+    def save_then_die(*args, **kwargs):
+        save(*args, **kwargs)
+        stored_steps.append(args[1:3])
+        if len(stored_steps) == 5:
+            raise KeyboardInterrupt  # killed with searches of other runs in flight
+
+    monkeypatch.setattr(lonlib.lockstep, "save_step", save_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=4)
+    monkeypatch.undo()
+    assert len(read_experiment_trials(tmp_path)) == 5
+    # every run's lock was released: a second session resumes at once, with other slots
+    run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=3)
+    trials, digest = stored(tmp_path)
+    pd.testing.assert_frame_equal(trials, serial[0])
+    assert digest.keys() == serial[1].keys()
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"executor": "lockstep", "scheduler": "dask-local"}, "does not use one"),
+        ({"executor": "dask"}, "needs a scheduler"),
+        ({"executor": "threads"}, "executor must be one of"),
+        ({"executor": "lockstep", "slots": 0}, "slots must be"),
+    ],
+)
+def test_bad_executor_settings_are_refused_before_any_compute(tmp_path, changes, message):
+    with pytest.raises(ValueError, match=message):
+        run_experiment(CONFIG, tmp_path / "out", progress=False, **changes)
+    assert not (tmp_path / "out").exists()
+
+
+def test_lockstep_needs_the_lean_learner(tmp_path):
+    config = dataclasses.replace(CONFIG, ddpg=dataclasses.replace(CONFIG.ddpg, update="autograd"))
+    with pytest.raises(ValueError, match="update='lean'"):
+        run_experiment(config, tmp_path, progress=False, executor="lockstep")
+
+
+def test_executor_and_slots_are_not_part_of_what_must_match_to_resume(tmp_path):
+    config = dataclasses.replace(CONFIG, runs=1, perturbations=(1e-3,), max_local_searches=1)
+    run_experiment(config, tmp_path, progress=False, executor="serial")
+    lockstep = dataclasses.replace(config, executor="lockstep", slots=2, runs=2)
+    trials = run_experiment(lockstep, tmp_path, progress=False)
+    assert sorted(trials["run"].unique()) == [0, 1]
+
+
+def test_cli_runs_the_lockstep_executor(tmp_path, capsys):
+    from lonlib.cli import main
+
+    path = tmp_path / "tiny.yaml"
+    path.write_text(
+        "name: tiny\nperturbations: [1.0e-3]\nruns: 2\ntolerance: 1\nmax_local_searches: 2\n"
+        "env: {n_carts: 1, steps: 40}\n"
+        "ddpg: {batch_size: 16, buffer_size: 200, warmup_steps: 30, max_steps: 60, min_steps: 0}\n"
+    )
+    main(
+        [
+            "run",
+            str(path),
+            "--executor",
+            "lockstep",
+            "--slots",
+            "2",
+            "--device",
+            "cpu",
+            "--out",
+            str(tmp_path / "out"),
+            "--quiet",
+        ]
+    )
+    assert "local searches stored" in capsys.readouterr().out
+    assert len(read_experiment_trials(tmp_path / "out")) >= 2
