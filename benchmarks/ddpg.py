@@ -29,6 +29,8 @@ TARGET_MS = {2000: 1.2, 256: 0.3}  # issue 12: one update, k = 1, one thread
 REPEATS = int(os.environ.get("BENCH_REPEATS", "5"))
 TRAINING_REPEATS = max(1, (REPEATS + 1) // 2)
 LEAN_TRAINING, AUTOGRAD_TRAINING = "lonlib, lean update", "lonlib, autograd update"
+LEAN_256 = "lonlib, lean update, batch 256"
+SEARCH_TARGET_S = 45.0  # issue 12: a 150 000-step local search at batch 256, per agent
 SB3_TRAINING = "Stable-Baselines3 DDPG"
 
 
@@ -49,7 +51,7 @@ def make_update(kind: str, k: int, batch: int) -> Callable[[], object]:
     replay = ReplayBuffer(k, HP.buffer_size, 20, 2, torch.device("cpu"))
     replay.data.uniform_()
     replay.data[..., -1] = (replay.data[..., -1] > 0.1).float()
-    replay.size = HP.buffer_size
+    replay.size[:] = HP.buffer_size
     sample = replay.sample(rng.integers(0, replay.size, (k, batch)))
     return lambda: learner.update(sample)
 
@@ -77,13 +79,15 @@ def update_ms(k: int, batch: int, updates: int = 40) -> dict[str, tuple[list[flo
     return {kind: (means[kind], fastest[kind]) for kind in work}
 
 
-def lonlib_seconds_per_2000_training_steps(update: str) -> float:
+def lonlib_seconds_per_2000_training_steps(update: str, batch: int = 2000) -> float:
     """Wall time of 2000 environment steps with training in lonlib's local search (k = 1)."""
     rng = np.random.default_rng(0)
     theta, omega = actor_spec(2).initial(rng), critic_spec(2).initial(rng)
 
     def run(steps: int) -> float:
-        hp = DDPGConfig(**{**HP.__dict__, "max_steps": steps, "update": update})
+        hp = DDPGConfig(
+            **{**HP.__dict__, "max_steps": steps, "update": update, "batch_size": batch}
+        )
         start = time.perf_counter()
         local_search(theta, omega, ENV, hp, seed=0)
         return time.perf_counter() - start
@@ -157,6 +161,7 @@ def training_rows() -> list[dict]:
     measured in turn within each repeat so all three see the same load."""
     measures = {
         LEAN_TRAINING: lambda: lonlib_seconds_per_2000_training_steps("lean"),
+        LEAN_256: lambda: lonlib_seconds_per_2000_training_steps("lean", 256),
         AUTOGRAD_TRAINING: lambda: lonlib_seconds_per_2000_training_steps("autograd"),
         SB3_TRAINING: sb3_seconds_per_2000_training_steps,
     }
@@ -196,6 +201,13 @@ def markdown(update: list[dict], training: list[dict], load: tuple[float, float]
     seconds = {
         row["training"]: row["s per 2000 steps"] for row in training if "s per 2000 steps" in row
     }
+    if LEAN_256 in seconds:
+        search = seconds[LEAN_256] * 75
+        met = "yes" if search <= SEARCH_TARGET_S else "no"
+        lines.append(
+            f"| a 150 000-step local search, batch 256, k = 1 (75 x 2000 training steps) "
+            f"| {search:.3g} s | | | <= {SEARCH_TARGET_S:g} s: {met} |"
+        )
     lean, reference = seconds.get(LEAN_TRAINING), seconds.get(AUTOGRAD_TRAINING)
     sb3 = seconds.get(SB3_TRAINING)
     if lean and reference:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from benchmarks.common import RESULTS
+from lonlib.readme_tables import splice as splice_between
 
 README = Path(__file__).parents[1] / "README.md"
 BEGIN, END = "<!-- ddpg-speed:begin (python -m benchmarks.readme) -->", "<!-- ddpg-speed:end -->"
@@ -16,11 +17,7 @@ BEGIN, END = "<!-- ddpg-speed:begin (python -m benchmarks.readme) -->", "<!-- dd
 
 def splice(readme: str, table: str) -> str:
     """``readme`` with the text between the markers replaced by ``table``."""
-    if readme.count(BEGIN) != 1 or readme.count(END) != 1:
-        raise ValueError(f"README.md must hold the markers {BEGIN!r} and {END!r} once each")
-    head, rest = readme.split(BEGIN)
-    _, tail = rest.split(END)
-    return f"{head}{BEGIN}\n{table.strip()}\n{END}{tail}"
+    return splice_between(readme, BEGIN, END, table)
 
 
 def main() -> None:

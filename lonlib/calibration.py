@@ -576,6 +576,52 @@ def cell_table(searches: pd.DataFrame, records: list[dict[str, Any]]) -> pd.Data
     return pd.DataFrame(rows, columns=CELL_COLUMNS)
 
 
+README_BEGIN = "<!-- calibration:begin (lonlib calibrate data/calibration --readme README.md) -->"
+README_END = "<!-- calibration:end -->"
+
+
+def _kilo(steps: float) -> str:
+    return f"{steps / 1000:.0f}k" if steps >= 1000 else f"{steps:.0f}"
+
+
+def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
+    """The cell table and the integrator drift as Markdown (``calibration.md``, and the
+    README's table via ``lonlib calibrate OUT --readme README.md``)."""
+
+    def steps(row: pd.Series) -> str:
+        if pd.isna(row["first_nonzero_steps_median"]):
+            return "never"
+        low, mid, high = (_kilo(row[f"first_nonzero_steps_{k}"]) for k in ("min", "median", "max"))
+        return f"{mid} ({low}–{high})"
+
+    lines = [
+        "| motor | integrator | reward | left zero | env steps to first > 0: median (range) "
+        "| best fitness (median best) | behaviours | best search: upright share / turns per "
+        "rod, end |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for _, row in cells.iterrows():
+        motor = (
+            f"velocity, τ = {row['motor_tau']:g} s"
+            if row["motor"] == "velocity"
+            else f"{row['motor']} × {row['motor_gain']:g}"
+        )
+        end = "survives" if row["best_end_reason"] == "step_limit" else row["best_end_reason"]
+        lines.append(
+            f"| {motor} | {row['integrator']} | {row['reward']} "
+            f"| {row['left_zero']} of {row['searches']} | {steps(row)} "
+            f"| {row['best_fitness']:.3f} ({row['median_best_fitness']:.3f}) "
+            f"| {row['behaviours']} | {row['best_upright_share']} / {row['best_turns']}, "
+            f"{end} at {row['best_end_step']} |"
+        )
+    lines += ["", "| integrator | " + " | ".join(drift.columns[1:]) + " |"]
+    lines.append("|---" * len(drift.columns) + "|")
+    for _, row in drift.iterrows():
+        values = [f"{v:.3g}" if isinstance(v, float) else str(v) for v in row.iloc[1:]]
+        lines.append(f"| {row.iloc[0]} | " + " | ".join(values) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) -> plt.Figure:
     """Left: best greedy fitness of every search per cell. Right: the best greedy fitness
     so far against env steps, one line per search, one colour per cell."""
@@ -674,6 +720,8 @@ def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResu
     files = [out / name for name in ("calibration.csv", "searches.csv", "drift.csv")]
     for table, path in zip((cells, searches, drift), files, strict=True):
         atomic_write(path, table.to_csv(index=False).encode())
+    files.append(out / "calibration.md")
+    atomic_write(files[-1], calibration_markdown(cells, drift).encode())
     png = out / "calibration.png"
     image = io.BytesIO()
     figure.savefig(image, dpi=120, format="png")
@@ -689,6 +737,7 @@ __all__ = [
     "Cell",
     "behaviour",
     "calibration_figure",
+    "calibration_markdown",
     "cell_table",
     "greedy_rollout",
     "grid",

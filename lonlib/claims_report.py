@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from lonlib.readme_tables import splice
 from lonlib.store import p_label
 
 CLAIM_COLUMNS = {"claim": "claim", "paper": "the paper says", "evidence": "evidence"}
@@ -76,9 +77,5 @@ def splice_readme(readme: str, markdown: str, source: str) -> str:
     """``readme`` with the text between :data:`README_BEGIN` and :data:`README_END`
     replaced by ``markdown`` and a line naming the experiment folder ``source`` it came
     from, so the README's claims table is generated, never typed."""
-    if readme.count(README_BEGIN) != 1 or readme.count(README_END) != 1:
-        raise ValueError(f"the README must hold {README_BEGIN!r} and {README_END!r} once each")
-    head, rest = readme.split(README_BEGIN)
-    _, tail = rest.split(README_END)
     body = f"*Generated from `{source}` by `lonlib analyse`.*\n\n{markdown.strip()}"
-    return f"{head}{README_BEGIN}\n{body}\n{README_END}{tail}"
+    return splice(readme, README_BEGIN, README_END, body)

@@ -94,10 +94,25 @@ def _analyse(args: argparse.Namespace) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> None:
-    from lonlib.calibration import load_calibration, run_calibration, with_overrides
+    from lonlib.calibration import (
+        README_BEGIN,
+        README_END,
+        load_calibration,
+        run_calibration,
+        with_overrides,
+    )
+    from lonlib.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
+    readme = Path(args.readme) if args.readme else None
+    if readme is not None:  # refuse a README without the markers before any work
+        splice(readme.read_text(), README_BEGIN, README_END, "")
     result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
+    if readme is not None:
+        table = (Path(args.out) / "calibration.md").read_text()
+        body = f"*Generated from `{args.out}` by `lonlib calibrate`.*\n\n{table}"
+        readme.write_text(splice(readme.read_text(), README_BEGIN, README_END, body))
+        print(f"calibration table pasted into {readme}")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(result.cells.drop(columns=["seconds"]).to_string(index=False))
         print(result.drift.to_string(index=False))
@@ -164,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--max-steps", type=int, help="env steps per search (override)")
     calibrate.add_argument("--batch", type=int, help="DDPG minibatch size (override)")
     calibrate.add_argument("--quiet", action="store_true", help="no progress bar")
+    calibrate.add_argument(
+        "--readme", help="also paste the cell table between the calibration markers of this file"
+    )
     calibrate.set_defaults(func=_calibrate)
     return parser
 
