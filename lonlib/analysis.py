@@ -20,7 +20,7 @@ from lonlib.behaviour import descriptors_of
 from lonlib.behaviour_lon import behaviour_table, behavioural_lon
 from lonlib.claims import claims_from_trials, peaks_beside_paper
 from lonlib.claims_report import write_claims
-from lonlib.experiment import ExperimentConfig
+from lonlib.configs import ExperimentConfig
 from lonlib.lon import build_lon, node_id, sinks
 from lonlib.lon_metrics import lon_metrics
 from lonlib.peaks import compare_with_paper, detect_peaks

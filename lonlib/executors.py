@@ -1,5 +1,8 @@
 """Executors: run independent jobs in this process, in local worker processes, or on Dask.
 
+(The fourth executor, ``lockstep``, trains the local searches of many runs as one batch in
+this process; it lives in :mod:`lonlib.lockstep`. :func:`resolve_executor` picks one.)
+
 A job is one basin-hopping run ``(p, run)``; ``task(p, run)`` executes (or resumes) it and
 must be picklable (a module-level function or a :func:`functools.partial` of one). Jobs
 share nothing but the output folder, so they may run in any order and anywhere. After each

@@ -1,44 +1,46 @@
-"""Experiments: named configurations -> basin-hopping runs, executed locally or on Dask.
+"""Experiments: configurations (:mod:`lonlib.configs`) -> basin-hopping runs, executed in
+this process, in local worker processes, on Dask or in lockstep batches.
 
 An :class:`ExperimentConfig` expands to ``runs`` independent basin-hopping runs for each
 perturbation strength ``p``. Run ``(p, run)`` draws everything from a seed derived from
 ``(experiment seed, p, run)``, so its result does not depend on where or in what order it
 runs. :func:`run_experiment` skips finished runs, continues interrupted ones after their
 last stored local search (see :mod:`lonlib.store`) and executes the rest serially, in local
-worker processes, or on a Dask cluster (:mod:`lonlib.executors`); :mod:`lonlib.manifest`
+worker processes, on a Dask cluster (:mod:`lonlib.executors`) or as lockstep batches
+(:mod:`lonlib.lockstep`); :mod:`lonlib.manifest`
 records the configuration and each session.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import errno
 import logging
 import time
-import zlib
-from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-import yaml
 from tqdm import tqdm
 
 from lonlib.basin_hopping import (
-    BasinHoppingConfig,
     BasinHoppingRun,
     RunState,
     ddpg_local_search,
 )
-from lonlib.ddpg import DDPGConfig
-from lonlib.executors import EXECUTORS, execute_runs, resolve_executor
+from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to live here)
+    EXECUTION_ONLY_DDPG_FIELDS,
+    QUICK_DDPG,
+    ExperimentConfig,
+    load_config,
+    named_config,
+)
+from lonlib.executors import execute_runs, resolve_executor
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.lockstep import run_lockstep
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
-from lonlib.pendulum import PendulumConfig
 from lonlib.progress import progress_bar
 from lonlib.store import (
     DataWriteError,
@@ -51,182 +53,12 @@ from lonlib.store import (
     save_step,
     write_json,
 )
-from lonlib.validation import check_choice, check_field_types, check_keys, check_range, is_finite
+from lonlib.validation import check_range
 
-EXECUTION_ONLY_DDPG_FIELDS = ("device", "threads")  # where DDPG runs, not what it computes
 log = logging.getLogger(__name__)
 
 RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
 MANIFEST_LOCK = ".manifest.lock"  # in the experiment folder: guards manifest check + update
-
-
-@dataclass(frozen=True)
-class ExperimentConfig:
-    """One LON sampling experiment: which p values, how many runs, and every setting."""
-
-    name: str = "quick"
-    perturbations: tuple[float, ...] = (1e-3, 1e-4)
-    runs: int = 4
-    tolerance: int = 2
-    max_local_searches: int = 6
-    seed: int = 2024
-    env: PendulumConfig = field(default_factory=PendulumConfig)
-    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
-    note: str = ""
-    executor: str = "auto"  # where runs execute (lonlib.executors.EXECUTORS); not results
-    slots: int = 16  # local searches per batch of the lockstep executor
-
-    def __post_init__(self) -> None:
-        check_field_types(self)
-        if not self.name.replace("-", "").replace("_", "").isalnum():
-            raise ValueError(f"name must be letters, digits, '-' or '_', got {self.name!r}")
-        if isinstance(self.perturbations, list):
-            object.__setattr__(self, "perturbations", tuple(self.perturbations))
-        if not isinstance(self.perturbations, tuple) or not self.perturbations:
-            raise ValueError(
-                f"perturbations must list at least one p > 0, got {self.perturbations!r}"
-            )
-        for p in self.perturbations:
-            if isinstance(p, bool) or not isinstance(p, (int, float)) or not is_finite(p):
-                raise ValueError(f"perturbations must be numbers, got {p!r}")
-            check_range("perturbations", p, 0.0, 10.0, low_open=True)
-        if len(set(self.perturbations)) != len(self.perturbations):
-            raise ValueError(f"perturbations must not repeat, got {self.perturbations}")
-        check_range("runs", self.runs, 1, 1_000_000)
-        check_choice("executor", self.executor, EXECUTORS)
-        check_range("slots", self.slots, 1, 100_000)
-        check_range("seed", self.seed, 0, 2**63 - 1)
-        # BasinHoppingConfig validates tolerance and max_local_searches by name.
-        self.basin_hopping(self.perturbations[0])
-        if not isinstance(self.env, PendulumConfig):
-            raise ValueError(f"env must be a PendulumConfig, got {self.env!r}")
-        if not isinstance(self.ddpg, DDPGConfig):
-            raise ValueError(f"ddpg must be a DDPGConfig, got {self.ddpg!r}")
-
-    def basin_hopping(self, p: float) -> BasinHoppingConfig:
-        """Algorithm 2's settings for perturbation strength ``p``."""
-        return BasinHoppingConfig(p, self.tolerance, self.max_local_searches)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain mapping (YAML/JSON friendly) that :meth:`from_mapping` reads back."""
-        out = dataclasses.asdict(self)
-        out["perturbations"] = list(self.perturbations)
-        return out
-
-    @classmethod
-    def from_mapping(cls, values: dict[str, Any]) -> ExperimentConfig:
-        """Build from a mapping, e.g. YAML. ``base: quick|paper`` starts from a named
-        configuration; unknown keys are refused by name."""
-        values = dict(_mapping("configuration", values))
-        base = values.pop("base", None)
-        if base is not None and base not in ("quick", "paper"):
-            raise ValueError(f"base must be 'quick' or 'paper', got {base!r}")
-        start = named_config(base).to_dict() if base else cls().to_dict()
-        check_keys("experiment", values, cls)
-        given = sorted(set(values) - {"name"})
-        env = {**start.pop("env"), **_mapping("env", values.pop("env", None))}
-        ddpg = {**start.pop("ddpg"), **_mapping("ddpg", values.pop("ddpg", None))}
-        merged = {**start, **values}
-        if "note" not in values and given:
-            merged["note"] = f"based on {base or 'the defaults'}, changed: {', '.join(given)}"
-        if not isinstance(merged["perturbations"], (list, tuple)):
-            raise ValueError(
-                f"perturbations must be a list of numbers, got {merged['perturbations']!r}"
-            )
-        merged["perturbations"] = tuple(
-            _as_float("perturbations", p) for p in merged["perturbations"]
-        )
-        check_keys("ddpg", ddpg, DDPGConfig)
-        return cls(env=PendulumConfig.from_mapping(env), ddpg=DDPGConfig(**ddpg), **merged)
-
-    def run_seed(self, p: float, run: int) -> int:
-        """Seed of run ``(p, run)``: a pure function of (experiment seed, p, run index)."""
-        p_key = zlib.crc32(repr(float(p)).encode())
-        return int(np.random.SeedSequence([self.seed, p_key, run]).generate_state(1)[0])
-
-    def comparable(self) -> dict[str, Any]:
-        """Every setting that changes results: what must match to resume an experiment or
-        add runs or p values to it. Where it runs (executor, slots, DDPG ``device`` and
-        ``threads``; workers and scheduler are not configuration at all) and the note do
-        not count: every executor gives a run the same trials."""
-        out = self.to_dict()
-        for key in ("runs", "perturbations", "note", "executor", "slots"):
-            out.pop(key)
-        for key in EXECUTION_ONLY_DDPG_FIELDS:
-            out["ddpg"].pop(key)
-        return out
-
-
-def _as_float(name: str, value: Any) -> float:
-    if isinstance(value, bool):
-        raise ValueError(f"{name} must be numbers, got {value!r}")
-    try:
-        return float(value)  # YAML 1.1 reads "1e-3" as a string
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{name} must be numbers, got {value!r}") from None
-
-
-def _mapping(name: str, value: Any) -> dict:
-    """``value`` as a mapping of settings (None, e.g. an empty YAML section, is empty)."""
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise ValueError(f"{name} must be a mapping of settings, got {value!r}")
-    return value
-
-
-QUICK_DDPG = DDPGConfig(
-    batch_size=256,
-    buffer_size=20_000,
-    warmup_steps=1000,
-    max_steps=6000,
-    min_steps=3000,
-    patience_steps=3000,
-)
-
-
-def named_config(name: str) -> ExperimentConfig:
-    """The built-in configurations ``quick`` (minutes; illustrates the pipeline with a shrunk
-    DDPG budget, not the paper's experiment) and ``paper`` (the paper's scale)."""
-    if name == "quick":
-        return ExperimentConfig(
-            name="quick",
-            perturbations=(1e-3, 1e-4),
-            runs=4,
-            tolerance=2,
-            max_local_searches=6,
-            ddpg=QUICK_DDPG,
-            note="quick: DDPG budget shrunk (batch 256, <= 6000 env steps per local search); "
-            "its LON illustrates the pipeline, it is not the paper's experiment",
-        )
-    if name == "paper":
-        return ExperimentConfig(
-            name="paper",
-            perturbations=(1e-3, 1e-4),
-            runs=100,
-            tolerance=5,
-            max_local_searches=100,
-            ddpg=DDPGConfig(),
-            note="paper scale: 2 x 100 runs, T = 5, 2000 steps, paper DDPG hyperparameters",
-        )
-    raise ValueError(f"unknown configuration {name!r}; use 'quick', 'paper' or a YAML file")
-
-
-def load_config(spec: str | Path) -> ExperimentConfig:
-    """A named configuration or a YAML file path."""
-    path = Path(spec)
-    if str(spec) in ("quick", "paper"):
-        return named_config(str(spec))
-    if not path.exists():
-        raise ValueError(f"configuration {spec!r} is neither 'quick', 'paper' nor a file")
-    try:
-        values = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as error:
-        raise ValueError(f"{path}: not valid YAML ({error})") from None
-    if not isinstance(values, dict):
-        raise ValueError(f"{path}: expected a mapping of configuration keys")
-    values.setdefault("name", path.stem)
-    return ExperimentConfig.from_mapping(values)
 
 
 # ---------------------------------------------------------------------------- one run

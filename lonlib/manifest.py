@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from lonlib.store import read_json
 
 if TYPE_CHECKING:
-    from lonlib.experiment import ExperimentConfig
+    from lonlib.configs import ExperimentConfig
 
 PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
 
