@@ -452,12 +452,10 @@ def run_cell(cell: Cell, config: CalibrationConfig) -> tuple[dict[str, Any], np.
     ):
         steps = [h.env_steps for h in result.history]
         fitness = [h.greedy_fitness for h in result.history]
-        nonzero = [s for s, f in zip(steps, fitness, strict=True) if f > 0]
         searches.append(
             {
                 "seed_index": index,
-                "best_fitness": max(fitness, default=0.0),
-                "first_nonzero_steps": nonzero[0] if nonzero else None,
+                **history_summary(steps, fitness),
                 "returned_fitness": result.fitness,
                 "start_fitness": result.start_fitness,
                 "env_steps": result.env_steps,
@@ -475,6 +473,18 @@ def run_cell(cell: Cell, config: CalibrationConfig) -> tuple[dict[str, Any], np.
         "searches": searches,
     }
     return record, best_thetas
+
+
+def history_summary(steps: list[int], fitness: list[float]) -> dict[str, Any]:
+    """Best greedy fitness of a trained policy (0 if none was judged) and the env steps of
+    the first non-zero one (None if never), from a search's per-episode history. Episodes
+    before the first update carry no greedy fitness (NaN) and are skipped."""
+    judged = [(s, f) for s, f in zip(steps, fitness, strict=True) if not math.isnan(f)]
+    nonzero = [s for s, f in judged if f > 0]
+    return {
+        "best_fitness": max((f for _, f in judged), default=0.0),
+        "first_nonzero_steps": nonzero[0] if nonzero else None,
+    }
 
 
 def cell_paths(out: Path, cell: Cell) -> tuple[Path, Path]:
@@ -530,6 +540,10 @@ def search_table(records: list[dict[str, Any]]) -> pd.DataFrame:
             # only the velocity motor has a time constant, only the others a gain
             row["motor_gain" if row["motor"] == "velocity" else "motor_tau"] = np.nan
             row.update({k: v for k, v in search.items() if not k.startswith("history_")})
+            # from the history, so that records stored before NaN-safe summaries read right
+            row.update(
+                history_summary(search["history_env_steps"], search["history_greedy_fitness"])
+            )
             rows.append(row)
     table = pd.DataFrame(rows)
     table["first_nonzero_steps"] = table["first_nonzero_steps"].astype("float64")
@@ -639,7 +653,7 @@ def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) ->
     for record, colour in zip(records, colours, strict=False):
         for i, search in enumerate(record["searches"]):
             steps = np.asarray(search["history_env_steps"], dtype=float)
-            fitness = np.maximum.accumulate(np.asarray(search["history_greedy_fitness"]))
+            fitness = np.fmax.accumulate(np.asarray(search["history_greedy_fitness"], dtype=float))
             label = record["name"] if i == 0 else None
             right.step(steps, fitness, where="post", color=colour, lw=1, label=label)
     left.set_yticks(range(len(names)), names, fontsize=8)

@@ -143,8 +143,8 @@ MUTANTS = [
     Mutant(
         DDPG,
         "REPLAY_SAMPLES, self.steps, hp.batch_size, self.replay.size",
-        "REPLAY_SAMPLES, self.updates, hp.batch_size, self.replay.size",
-        "replay samples drawn by another counter than the slot's step (K-dependent)",
+        "REPLAY_SAMPLES, self.steps + np.arange(self.slots), hp.batch_size, self.replay.size",
+        "replay samples depend on the slot (K-dependent)",
     ),
     Mutant(
         STREAMS,

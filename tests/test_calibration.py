@@ -253,3 +253,25 @@ def test_notebook_runs_the_tiny_grid(tmp_path):
     cells = pd.read_csv(out / "calibration.csv")
     assert len(cells) == 2 and (cells["searches"] == 2).all()
     assert (out / "calibration.png").stat().st_size > 0
+
+
+def test_episodes_before_the_first_update_do_not_hide_the_best_fitness():
+    nan = float("nan")
+    summary = calibration.history_summary([40, 80, 120, 160], [nan, 0.0, 0.25, 0.1])
+    assert summary == {"best_fitness": 0.25, "first_nonzero_steps": 120}
+    assert calibration.history_summary([40], [nan]) == {
+        "best_fitness": 0.0,
+        "first_nonzero_steps": None,
+    }
+
+
+def test_a_warm_up_longer_than_an_episode_still_gives_a_best_fitness(tmp_path):
+    tiny = calibration.named_calibration("tiny")
+    config = dataclasses.replace(
+        tiny, cells=tiny.cells[:1], ddpg=dataclasses.replace(tiny.ddpg, warmup_steps=120)
+    )
+    record, _ = calibration.run_cell(config.cells[0], config)
+    assert any(np.isnan(s["history_greedy_fitness"][0]) for s in record["searches"])
+    table = calibration.search_table([record])
+    assert table["best_fitness"].notna().all()
+    assert (table["best_fitness"] > 0).any()
