@@ -1,0 +1,81 @@
+"""Counter-based streams: an agent's numbers depend only on its seed, purpose and counter."""
+
+import numpy as np
+import pytest
+import torch
+
+from lonlib.random_streams import (
+    EXPLORATION_NOISE,
+    REPLAY_SAMPLES,
+    WARMUP_ACTIONS,
+    CounterStreams,
+    _TorchWords,
+)
+
+
+def torch_backend(seeds):
+    """Streams computed with the torch int64 backend (what CUDA uses) on the CPU."""
+    streams = CounterStreams(seeds)
+    streams._words = _TorchWords(torch.device("cpu"))
+    streams._keys = streams._words.keys(streams.seeds)
+    return streams
+
+
+def test_an_agents_draws_do_not_depend_on_the_batch_or_its_row():
+    seeds = [7, 2**64 - 1, 0, 123456789]
+    counters = np.array([3, 10, 0, 99])
+    together = CounterStreams(seeds)
+    for draw in ("uniform", "normal"):
+        batch = getattr(together, draw)(EXPLORATION_NOISE, counters, 5)
+        for i, seed in enumerate(seeds):
+            alone = getattr(CounterStreams([seed]), draw)(EXPLORATION_NOISE, counters[i : i + 1], 5)
+            assert torch.equal(batch[i], alone[0])
+    reordered = CounterStreams(seeds[::-1]).uniform(WARMUP_ACTIONS, counters[::-1], 3)
+    assert torch.equal(reordered.flip(0), together.uniform(WARMUP_ACTIONS, counters, 3))
+
+
+def test_purposes_counters_and_seeds_give_different_numbers():
+    streams = CounterStreams([1, 1])
+    a = streams.uniform(WARMUP_ACTIONS, np.array([0, 1]), 4)
+    assert not torch.equal(a[0], a[1])  # same seed, other counter
+    b = streams.uniform(EXPLORATION_NOISE, np.array([0, 1]), 4)
+    assert not torch.equal(a, b)  # other purpose
+    c = CounterStreams([2, 2]).uniform(WARMUP_ACTIONS, np.array([0, 1]), 4)
+    assert not torch.equal(a, c)  # other seed
+
+
+def test_distributions():
+    streams = CounterStreams([11, 12])
+    u = streams.uniform(WARMUP_ACTIONS, np.array([0, 0]), 200_000)
+    assert u.min() >= 0.0 and u.max() < 1.0
+    assert u.mean().item() == pytest.approx(0.5, abs=0.005)
+    assert u.var().item() == pytest.approx(1 / 12, rel=0.02)
+    z = streams.normal(EXPLORATION_NOISE, np.array([5, 5]), 200_000)
+    assert z.mean().item() == pytest.approx(0.0, abs=0.01)
+    assert z.std().item() == pytest.approx(1.0, rel=0.01)
+    assert (z.abs() > 3).float().mean().item() == pytest.approx(0.0027, abs=0.001)
+    k = streams.integers(REPLAY_SAMPLES, np.array([1, 1]), 100_001, np.array([7, 40_000]))
+    assert k.dtype == torch.int64 and k.shape == (2, 100_001)
+    counts = np.bincount(k[0].numpy(), minlength=7)
+    assert counts.size == 7 and counts.min() > 0.95 * 100_001 / 7
+    assert k[1].min() >= 0 and k[1].max() < 40_000 and len(np.unique(k[1])) > 35_000
+
+
+def test_the_torch_backend_draws_the_same_numbers_as_the_numpy_one():
+    seeds, counters = [3, 2**63 + 5, 0], np.array([0, 7, 2**40])
+    cpu, emulated = CounterStreams(seeds), torch_backend(seeds)
+    for purpose in (WARMUP_ACTIONS, REPLAY_SAMPLES):
+        assert torch.equal(
+            cpu.uniform(purpose, counters, 9), emulated.uniform(purpose, counters, 9)
+        )
+    high = np.array([5, 40_000, 2**31 - 1])
+    assert torch.equal(
+        cpu.integers(REPLAY_SAMPLES, counters, 11, high),
+        emulated.integers(REPLAY_SAMPLES, counters, 11, high),
+    )
+
+
+@pytest.mark.parametrize("seed", [-1, 2**64, 1.5, True, "7"])
+def test_bad_seeds_are_refused(seed):
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        CounterStreams([seed])
