@@ -125,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="run (or resume) an experiment")
-    run.add_argument("config", help="'quick', 'paper' or a YAML file")
+    run.add_argument("config", help="'quick', 'reference', 'paper' or a YAML file")
     run.add_argument("--p", type=float, nargs="+", help="perturbation strengths (override)")
     run.add_argument("--runs", type=int, help="runs per p (override)")
     run.add_argument("--workers", type=int, default=1, help="local worker processes")

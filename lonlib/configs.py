@@ -19,6 +19,7 @@ from lonlib.pendulum import PendulumConfig
 from lonlib.validation import check_choice, check_field_types, check_keys, check_range, is_finite
 
 EXECUTION_ONLY_DDPG_FIELDS = ("device", "threads")  # where DDPG runs, not what it computes
+NAMED_CONFIGS = ("quick", "reference", "paper")
 
 
 @dataclass(frozen=True)
@@ -76,12 +77,12 @@ class ExperimentConfig:
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> ExperimentConfig:
-        """Build from a mapping, e.g. YAML. ``base: quick|paper`` starts from a named
+        """Build from a mapping, e.g. YAML. ``base: quick|reference|paper`` starts from a named
         configuration; unknown keys are refused by name."""
         values = dict(_mapping("configuration", values))
         base = values.pop("base", None)
-        if base is not None and base not in ("quick", "paper"):
-            raise ValueError(f"base must be 'quick' or 'paper', got {base!r}")
+        if base is not None and base not in NAMED_CONFIGS:
+            raise ValueError(f"base must be one of {NAMED_CONFIGS}, got {base!r}")
         start = named_config(base).to_dict() if base else cls().to_dict()
         check_keys("experiment", values, cls)
         given = sorted(set(values) - {"name"})
@@ -146,9 +147,15 @@ QUICK_DDPG = DDPGConfig(
 )
 
 
+REFERENCE_RUNS = 20  # per p
+
+
 def named_config(name: str) -> ExperimentConfig:
-    """The built-in configurations ``quick`` (minutes; illustrates the pipeline with a shrunk
-    DDPG budget, not the paper's experiment) and ``paper`` (the paper's scale)."""
+    """The built-in configurations (:data:`NAMED_CONFIGS`): ``quick`` (minutes on a laptop:
+    the calibrated physics with a shrunk DDPG budget, not the paper's experiment),
+    ``reference`` (the experiment whose results are committed under ``data/reference``:
+    both p, T = 5, the paper's DDPG, fewer runs than the paper) and ``paper`` (the paper's
+    scale). All three share the physics (``PendulumConfig()``): one model, three budgets."""
     if name == "quick":
         return ExperimentConfig(
             name="quick",
@@ -160,6 +167,19 @@ def named_config(name: str) -> ExperimentConfig:
             note="quick: DDPG budget shrunk (batch 256, <= 6000 env steps per local search); "
             "its LON illustrates the pipeline, it is not the paper's experiment",
         )
+    if name == "reference":
+        return ExperimentConfig(
+            name="reference",
+            perturbations=(1e-3, 1e-4),
+            runs=REFERENCE_RUNS,
+            tolerance=5,
+            max_local_searches=100,
+            ddpg=DDPGConfig(),
+            executor="lockstep",
+            slots=2 * REFERENCE_RUNS,
+            note=f"reference: 2 x {REFERENCE_RUNS} runs, T = 5, the paper's DDPG and budget; "
+            "the paper's algorithm with fewer runs than its 2 x 100",
+        )
     if name == "paper":
         return ExperimentConfig(
             name="paper",
@@ -170,16 +190,16 @@ def named_config(name: str) -> ExperimentConfig:
             ddpg=DDPGConfig(),
             note="paper scale: 2 x 100 runs, T = 5, 2000 steps, paper DDPG hyperparameters",
         )
-    raise ValueError(f"unknown configuration {name!r}; use 'quick', 'paper' or a YAML file")
+    raise ValueError(f"unknown configuration {name!r}; use one of {NAMED_CONFIGS} or a YAML file")
 
 
 def load_config(spec: str | Path) -> ExperimentConfig:
     """A named configuration or a YAML file path."""
     path = Path(spec)
-    if str(spec) in ("quick", "paper"):
+    if str(spec) in NAMED_CONFIGS:
         return named_config(str(spec))
     if not path.exists():
-        raise ValueError(f"configuration {spec!r} is neither 'quick', 'paper' nor a file")
+        raise ValueError(f"configuration {spec!r} is neither one of {NAMED_CONFIGS} nor a file")
     try:
         values = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as error:

@@ -13,6 +13,7 @@ records the configuration and each session.
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import logging
 import time
@@ -31,6 +32,7 @@ from lonlib.basin_hopping import (
 )
 from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to live here)
     EXECUTION_ONLY_DDPG_FIELDS,
+    NAMED_CONFIGS,
     QUICK_DDPG,
     ExperimentConfig,
     load_config,
@@ -172,13 +174,15 @@ def run_experiment(
     kind = resolve_executor(executor or config.executor, workers, scheduler)
     slots = config.slots if slots is None else slots
     check_range("slots", slots, 1, 100_000)
+    config = dataclasses.replace(config, executor=kind, slots=slots)  # what this session uses
     out = Path(out)
     check_output_folder(out)
     with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
         remove_temporary_files(out, manifest_path(out).name)
         manifest = updated_manifest(config, out)
         todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
-        write_json(manifest_path(out), manifest)
+        if todo or not manifest_path(out).exists():  # a finished experiment stays untouched
+            write_json(manifest_path(out), manifest)
     total = len(config.perturbations) * config.runs
     bar = progress_bar(
         total=total,

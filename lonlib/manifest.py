@@ -78,7 +78,12 @@ def updated_manifest(config: ExperimentConfig, out: Path) -> dict[str, Any]:
                 "versions": _versions(),
                 "git_commit": _git_commit(),
                 # where DDPG ran this session: not configuration (results do not depend on it)
-                "execution": {"device": config.ddpg.device, "threads": config.ddpg.threads},
+                "execution": {
+                    "device": config.ddpg.device,
+                    "threads": config.ddpg.threads,
+                    "executor": config.executor,
+                    "slots": config.slots,
+                },
             }
         )
     else:

@@ -233,3 +233,11 @@ def test_a_trials_table_from_an_older_lonlib_is_named_as_such(tmp_path):
     pd.DataFrame([[1e-4, 0, 0, -1, 0.0, True, 1.0, 10]], columns=columns).to_parquet(old)
     with pytest.raises(CorruptDataError, match="older lonlib"):
         read_trials(old)
+
+
+def test_rerunning_a_finished_experiment_changes_no_file(tiny_experiment):
+    config, folder, _ = tiny_experiment
+    before = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file() and p.name != ".lock"}
+    run_experiment(config, folder, progress=False, executor="lockstep")
+    after = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file() and p.name != ".lock"}
+    assert after == before
