@@ -499,18 +499,21 @@ def _backward(steps: list[tuple[torch.Tensor, ...]]) -> None:
 def _gradient(dz: torch.Tensor, inputs_t: torch.Tensor, grad: tuple[torch.Tensor, ...]) -> None:
     """A layer's weight gradient ``dz @ input^T`` into its view of the flat gradient."""
     view, buffer = grad
-    _bmm(dz, inputs_t, buffer)
+    _bmm(dz, inputs_t, buffer, reduces_batch=True)
     if buffer is not view:
         view.copy_(buffer)
 
 
-def _bmm(a: torch.Tensor, b: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+def _bmm(
+    a: torch.Tensor, b: torch.Tensor, out: torch.Tensor, reduces_batch: bool = False
+) -> torch.Tensor:
     """``a @ b`` per agent (``[m, r, n] @ [m, n, c]``) into ``out``, with every agent's
     result independent of how many agents share the batch. BLAS picks other kernels, and so
-    other summation orders, for one-row or one-column products depending on the batch
-    count; those are written as an elementwise product and a sum (cheap at these sizes),
-    so a search gives the same bits alone or in any lockstep batch."""
-    if a.shape[1] == 1:
+    other summation orders, by batch count for one-column products and for one-row products
+    that sum over the minibatch (``reduces_batch``: a one-unit layer's weight gradient);
+    those are written as an elementwise product and a sum (measured: the others are
+    batch-invariant), so a search gives the same bits alone or in any lockstep batch."""
+    if a.shape[1] == 1 and reduces_batch:
         return torch.sum(a.transpose(1, 2) * b, dim=1, keepdim=True, out=out)
     if b.shape[2] == 1:
         return torch.sum(a * b.transpose(1, 2), dim=2, keepdim=True, out=out)
