@@ -15,7 +15,11 @@ Coordinates and units (SI)
   right (+x), wrapped to ``[0, 2*pi)``: ``phi = 0`` upright, ``phi = pi`` hanging.
 * ``phi_dot`` angular velocity [rad/s].
 
-Per-cart dynamics: classic cart-pole (Barto et al. 1983, with the rod equations as corrected
+Motor models (``motor``): the default is the **velocity** motor (the command is the cart's
+target speed, a speed servo with time constant ``motor_tau``), chosen by the calibration
+study; ``"force"`` (the spec's first choice) and ``"acceleration"`` remain options.
+
+With ``motor="force"`` the per-cart dynamics are the classic cart-pole (Barto et al. 1983, with the rod equations as corrected
 by R. V. Florian, "Correct equations for the dynamics of the cart-pole system", 2007),
 uniform rod of mass ``m``, half-length ``l``, cart mass ``M``, hinge friction ``mu_p`` and
 Barto's Coulomb cart friction ``mu_c sgn(x_dot)`` (not Florian's normal-force form)::
@@ -47,16 +51,12 @@ servo that reaches the commanded speed in one step.
 
 Carts interact only through the termination rules (the tether is a chain, not a spring).
 Integration: ``substeps`` Euler steps per control step of ``dt`` seconds. The default is
-**explicit Euler** (all derivatives from the old state), the spec's choice;
-``integrator="semi-implicit"`` (symplectic Euler: velocities first, then positions with the
-new velocities) is the alternative. Know what the default does: at dt = 0.02 s explicit
-Euler feeds energy into a swinging rod (small-swing amplitude x sqrt(1 + w^2 dt^2) = x1.0032
-per step, about x100-x400 over a 2000-step episode, like a hinge with slightly negative
-friction), so with 0.02 rad of start noise even a policy
-that never pushes can swing a rod up (fitness 0.10 measured). We keep it because the
-learning problem depends on it: measured on two carts with the paper's DDPG, 3 of 3 seeds
-reached greedy fitness 0.23-0.28 under explicit Euler and 0 of 3 under semi-implicit Euler
-(README, "The integrator and learnability").
+**semi-implicit (symplectic) Euler** (velocities first, then positions with the new
+velocities), chosen by the calibration study (README, "Calibration study"): it keeps a
+swinging rod's energy bounded, while ``integrator="euler"`` (explicit Euler, all derivatives
+from the old state; the spec's first choice, kept as an option) feeds energy into it
+(small-swing amplitude x sqrt(1 + w^2 dt^2) = x1.0032 per step, about x100-x400 over a
+2000-step episode, like a hinge with slightly negative friction).
 The energy and the horizontal momentum ``(M + m) x_dot + m l cos(phi) phi_dot`` of one
 rod-and-cart (frictionless, no motor) are conserved by the continuous equations and are used
 by the tests::
@@ -175,8 +175,8 @@ class PendulumConfig:
     hinge_friction: float = 0.000002
     dt: float = 0.02
     substeps: int = 1
-    integrator: str = "euler"
-    motor: str = "force"
+    integrator: str = "semi-implicit"
+    motor: str = "velocity"
     motor_gain: float = 1.0
     motor_tau: float = 0.02
     cart_width: float = 0.2

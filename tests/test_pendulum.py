@@ -22,9 +22,10 @@ FRICTIONLESS = {"cart_friction": 0.0, "hinge_friction": 0.0}
 
 def free_drift(quantity, substeps: int, integrator: str = "euler") -> float:
     """Largest change of ``quantity(cfg, sim)`` for a free (frictionless, unpushed) cart and
-    swinging rod over 500 steps."""
+    swinging rod over 500 steps (the force motor: only it leaves the cart free)."""
     cfg = PendulumConfig(
         n_carts=1,
+        motor="force",
         substeps=substeps,
         integrator=integrator,
         track_half_length_base=100.0,
@@ -349,8 +350,13 @@ def test_explicit_euler_swings_a_hanging_rod_up_and_semi_implicit_does_not(integ
         assert (sim.fitness == 0).all()
 
 
-def test_default_integrator_is_the_specs_explicit_euler():
-    assert PendulumConfig().integrator == "euler"
+def test_default_physics_is_the_calibrated_velocity_motor_with_semi_implicit_euler():
+    config = PendulumConfig()
+    assert (config.motor, config.integrator, config.motor_tau) == (
+        "velocity",
+        "semi-implicit",
+        0.02,
+    )
 
 
 def horizontal_momentum(cfg, sim):
@@ -363,7 +369,9 @@ def horizontal_momentum(cfg, sim):
 def test_a_coasting_cart_slows_down_under_coulomb_friction(v0):
     # Barto's cart friction mu_c sgn(x_dot) is the only horizontal force on an unpushed
     # cart and rod: their momentum falls at exactly mu_c against the motion.
-    cfg = PendulumConfig(n_carts=1, cart_friction=0.05, hinge_friction=0.0, substeps=10)
+    cfg = PendulumConfig(
+        n_carts=1, motor="force", cart_friction=0.05, hinge_friction=0.0, substeps=10
+    )
     sim = CoupledPendulums(cfg)
     sim.x_dot[:] = v0
     p0 = horizontal_momentum(cfg, sim)[0, 0]
