@@ -141,9 +141,9 @@ QUICK_DDPG = DDPGConfig(
     batch_size=256,
     buffer_size=20_000,
     warmup_steps=1000,
-    max_steps=6000,
-    min_steps=3000,
-    patience_steps=3000,
+    max_steps=40_000,
+    min_steps=20_000,
+    patience_steps=15_000,
 )
 
 
@@ -162,10 +162,13 @@ def named_config(name: str) -> ExperimentConfig:
             perturbations=(1e-3, 1e-4),
             runs=4,
             tolerance=2,
-            max_local_searches=6,
+            max_local_searches=5,
             ddpg=QUICK_DDPG,
-            note="quick: DDPG budget shrunk (batch 256, <= 6000 env steps per local search); "
-            "its LON illustrates the pipeline, it is not the paper's experiment",
+            executor="lockstep",
+            slots=8,
+            note="quick: DDPG budget shrunk (batch 256, <= 40 000 env steps per local search, "
+            "T = 2, 4 runs per p); its LON illustrates the method, it is not the paper's "
+            "experiment",
         )
     if name == "reference":
         return ExperimentConfig(

@@ -201,7 +201,9 @@ def run_experiment(
 
     def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
         if kind == "lockstep":
-            run_lockstep(out, config, jobs, on_done, slots, wait, lambda: _refresh(bar, out))
+            run_lockstep(
+                out, config, jobs, on_done, slots, wait, lambda info: _refresh(bar, out, batch=info)
+            )
             return
         execute_runs(
             partial(run_one, out, config, wait=wait),
@@ -242,14 +244,18 @@ def check_worker_sees_folder(out: str) -> None:
     check_output_folder(Path(out))
 
 
-def _refresh(bar: tqdm, out: Path, done: int = 0) -> None:
-    """Advance the progress bar and show local searches and the best fitness so far."""
+def _refresh(bar: tqdm, out: Path, done: int = 0, batch: dict | None = None) -> None:
+    """Advance the progress bar and show local searches and the best fitness so far (and,
+    from the lockstep executor, its batch: searches in flight, env steps per second)."""
     if bar.disable:
         return
     bar.update(done)
     trials = read_experiment_trials(out)
+    postfix = dict(batch or {})
     if len(trials):
-        bar.set_postfix(local_searches=len(trials), best=f"{trials['fitness'].max():.3f}")
+        postfix.update(local_searches=len(trials), best=f"{trials['fitness'].max():.3f}")
+    if postfix:
+        bar.set_postfix(postfix)
 
 
 def status(out: str | Path) -> pd.DataFrame:

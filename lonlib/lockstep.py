@@ -55,7 +55,7 @@ def run_lockstep(
     on_done: Callable[[dict[str, Any]], None],
     slots: int,
     wait: bool = False,
-    on_tick: Callable[[], None] | None = None,
+    on_tick: Callable[[dict[str, Any]], None] | None = None,
     tick_seconds: float = 5.0,
 ) -> None:
     """Run (or resume) the runs ``jobs`` of experiment ``config`` in ``out`` through one
@@ -64,7 +64,8 @@ def run_lockstep(
     ``on_done(summary)`` is called as each run ends (the summary of
     :func:`lonlib.experiment.run_summary`), and for a run another process holds, at once
     with ``held_by`` naming the holder (unless ``wait``: then its lock is waited for).
-    ``on_tick()`` runs every ``tick_seconds`` for progress displays.
+    ``on_tick(info)`` runs every ``tick_seconds`` for progress displays, with the searches
+    in flight and the env steps per second of the batch since the last tick.
     """
     from lonlib.experiment import open_run, run_lock_path, run_summary
 
@@ -119,8 +120,10 @@ def run_lockstep(
             config.ddpg,
             tags=[(r.p, r.run) for r in first],
         )
-        last_tick = time.monotonic()
+        last_tick, steps_at_tick = time.monotonic(), 0
+        steps = 0
         while trainer.busy.any():
+            steps += int(trainer.busy.sum())
             refill: list[_Run] = []
             for tag, result in trainer.step():
                 run = active[tag]
@@ -145,9 +148,11 @@ def run_lockstep(
                 )
             elif not pending and not trainer.busy.all():
                 trainer.shrink()
-            if on_tick is not None and time.monotonic() - last_tick >= tick_seconds:
-                on_tick()
-                last_tick = time.monotonic()
+            now = time.monotonic()
+            if on_tick is not None and now - last_tick >= tick_seconds:
+                rate = (steps - steps_at_tick) / (now - last_tick)
+                on_tick({"in_flight": int(trainer.busy.sum()), "env_steps/s": f"{rate:,.0f}"})
+                last_tick, steps_at_tick = now, steps
     finally:
         for run in active.values():
             run.lock.close()

@@ -19,8 +19,9 @@ Motor models (``motor``): the default is the **velocity** motor (the command is 
 target speed, a speed servo with time constant ``motor_tau``), chosen by the calibration
 study; ``"force"`` (the spec's first choice) and ``"acceleration"`` remain options.
 
-With ``motor="force"`` the per-cart dynamics are the classic cart-pole (Barto et al. 1983, with the rod equations as corrected
-by R. V. Florian, "Correct equations for the dynamics of the cart-pole system", 2007),
+With ``motor="force"`` the per-cart dynamics are the classic cart-pole (Barto et al. 1983,
+with the rod equations as corrected by R. V. Florian, "Correct equations for the dynamics
+of the cart-pole system", 2007),
 uniform rod of mass ``m``, half-length ``l``, cart mass ``M``, hinge friction ``mu_p`` and
 Barto's Coulomb cart friction ``mu_c sgn(x_dot)`` (not Florian's normal-force form)::
 

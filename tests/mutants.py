@@ -174,8 +174,8 @@ MUTANTS = [
     Mutant(
         LOCKSTEP,
         "trainer.free_slots()[: len(refill)],",
-        "trainer.free_slots()[::-1][: len(refill)],",
-        "refills land in slots that are still busy",
+        "trainer.free_slots()[:1] * len(refill),",
+        "two refills land in one slot",
     ),
     # --- DDPG: what F returns
     Mutant(
