@@ -40,7 +40,7 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
 )
 from lonlib.executors import execute_runs, resolve_executor
 from lonlib.lock import LockHeld, exclusive_lock
-from lonlib.lockstep import run_lockstep
+from lonlib.lockstep import run_lockstep_processes
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.progress import progress_bar
@@ -156,12 +156,13 @@ def run_experiment(
     ``executor`` (default: the configuration's, ``"auto"``) picks where runs execute:
     ``"serial"`` in this process; ``"pool"``: ``workers`` local processes (one torch thread
     each); ``"dask"``: on ``scheduler``, a Dask scheduler address or ``"dask-local"`` for a
-    LocalCluster of ``workers`` processes; ``"lockstep"``: in this process, the local
-    searches of up to ``slots`` runs trained as one batch (:mod:`lonlib.lockstep`; on the
-    device ``config.ddpg.device``). ``"auto"``: Dask if a scheduler is given, else a pool for
-    ``workers`` > 1, else serial. Every executor gives a run the same trials. A run whose
-    worker dies is retried (up to ``max_attempts``) and resumes from its last stored local
-    search.
+    LocalCluster of ``workers`` processes; ``"lockstep"``: the local searches of up to
+    ``slots`` runs trained as one batch (:mod:`lonlib.lockstep`; on the device
+    ``config.ddpg.device``), in this process, or with ``workers`` > 1 one batch per worker
+    process, each over every ``workers``-th run. ``"auto"``: Dask if a scheduler is given,
+    else a pool for ``workers`` > 1, else serial. Every executor gives a run the same
+    trials. A run whose worker dies is retried (up to ``max_attempts``) and resumes from its
+    last stored local search.
 
     Before any compute: ``out`` must exist or be creatable in an existing folder and accept
     files (:class:`lonlib.store.DataWriteError` otherwise; on Dask, every worker checks it
@@ -201,8 +202,15 @@ def run_experiment(
 
     def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
         if kind == "lockstep":
-            run_lockstep(
-                out, config, jobs, on_done, slots, wait, lambda info: _refresh(bar, out, batch=info)
+            run_lockstep_processes(
+                out,
+                config,
+                jobs,
+                on_done,
+                slots,
+                workers,
+                wait,
+                lambda info: _refresh(bar, out, batch=info),
             )
             return
         execute_runs(

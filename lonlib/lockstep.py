@@ -18,6 +18,8 @@ searches in flight.
 
 from __future__ import annotations
 
+import concurrent.futures as cf
+import multiprocessing
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -156,3 +158,51 @@ def run_lockstep(
     finally:
         for run in active.values():
             run.lock.close()
+
+
+def run_lockstep_processes(
+    out: str | Path,
+    config: Any,
+    jobs: Sequence[Job],
+    on_done: Callable[[dict[str, Any]], None],
+    slots: int,
+    workers: int,
+    wait: bool = False,
+    on_tick: Callable[[dict[str, Any]], None] | None = None,
+    tick_seconds: float = 5.0,
+) -> None:
+    """:func:`run_lockstep` in ``workers`` spawned processes, each a batch of up to
+    ``slots`` searches over every ``workers``-th job (for machines with a few cores and no
+    GPU: one lockstep batch per core). A run's trials are the same as in one batch."""
+    check_range("workers", workers, 1, 4096)
+    groups = [list(jobs[i::workers]) for i in range(workers)]
+    groups = [group for group in groups if group]
+    if len(groups) <= 1:
+        run_lockstep(out, config, jobs, on_done, slots, wait, on_tick, tick_seconds)
+        return
+    context = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(len(groups), mp_context=context) as pool:
+        futures = [
+            pool.submit(_lockstep_group, str(out), config, group, slots, wait) for group in groups
+        ]
+        pending = set(futures)
+        try:
+            while pending:
+                done, pending = cf.wait(pending, timeout=tick_seconds)
+                for future in done:
+                    for summary in future.result():
+                        on_done(summary)
+                if on_tick is not None:
+                    on_tick({"processes": len(pending)})
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+
+
+def _lockstep_group(
+    out: str, config: Any, jobs: list[Job], slots: int, wait: bool
+) -> list[dict[str, Any]]:
+    """One worker process's lockstep batch; the summaries of its runs."""
+    summaries: list[dict[str, Any]] = []
+    run_lockstep(out, config, jobs, summaries.append, slots, wait)
+    return summaries

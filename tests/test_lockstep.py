@@ -153,3 +153,10 @@ def test_cli_runs_the_lockstep_executor(tmp_path, capsys):
     )
     assert "local searches stored" in capsys.readouterr().out
     assert len(read_experiment_trials(tmp_path / "out")) >= 2
+
+
+def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path):
+    run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=3, workers=2)
+    trials, digest = stored(tmp_path)
+    pd.testing.assert_frame_equal(trials, serial[0])
+    assert digest.keys() == serial[1].keys()
