@@ -227,6 +227,9 @@ def local_search_batch(
     return results
 
 
+JUDGE_BATCH = 16  # at most this many queued greedy evaluations per batched rollout
+
+
 @dataclass
 class _Search:
     """Host-side bookkeeping of the local search in one slot (touched only at events)."""
@@ -237,6 +240,7 @@ class _Search:
     result: LocalSearchResult
     best: tuple[float, float]  # greedy (fitness, return) of the returned parameters so far
     started: float  # time.perf_counter() at its start
+    pending: int = 0  # its policies queued for a greedy evaluation
 
 
 class SlotTrainer:
@@ -291,6 +295,10 @@ class SlotTrainer:
         self.loss_sum = torch.zeros(2, k, dtype=torch.float64, device=self.device)
         self.loss_count = np.zeros(k, dtype=np.int64)
         self.obs = np.zeros((k, env_config.observation_size), dtype=np.float32)
+        # Greedy evaluations wait in a queue and run as one batched rollout once there are
+        # ``judge_batch`` of them (or before a search they concern may stop).
+        self.pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]] = []
+        self.judge_batch = min(k, JUDGE_BATCH)
         self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)), fresh=True)
 
     @property
@@ -391,19 +399,29 @@ class SlotTrainer:
             )
             self.loss_count += training
             self.updates += training
-        # 4. episode ends: greedy fitness of the trained Actors, best parameters, reset
+        # 4. episode ends: queue the greedy fitness of the trained Actors, reset
         ended = (outcome.terminated | outcome.truncated) & busy
         if ended.any():
             self._end_episodes(ended)
             self._reset_environments(ended)
         else:
             self.obs = next_obs
+        if len(self.pending) >= self.judge_batch:
+            self._judge_pending()
         # stopping rules: patience (counted from the end of the warm-up) or budget
+        stop, stale = self._stopping()
+        if stop.any() and any(self.searches[i].pending for i in np.flatnonzero(stop)):
+            self._judge_pending()  # a queued improvement may keep a search going
+            stop, stale = self._stopping()
+        return self._stop(stop, stale) if stop.any() else []
+
+    def _stopping(self) -> tuple[np.ndarray, np.ndarray]:
+        """Which busy slots stop now, and which of them by patience."""
+        hp = self.hp
         stale = (self.steps >= hp.min_steps) & (
             self.steps - self.last_improvement >= hp.patience_steps
         )
-        stop = busy & (stale | (self.steps >= hp.max_steps))
-        return self._stop(stop, stale) if stop.any() else []
+        return self.busy & (stale | (self.steps >= hp.max_steps)), stale
 
     def _actions(self, warm: np.ndarray) -> np.ndarray:
         """``[K, n]`` actions in [0, 1]: uniform for slots in their warm-up, else the Actor
@@ -430,63 +448,71 @@ class SlotTrainer:
         self.obs = self.sim.observe().astype(np.float32)
 
     def _end_episodes(self, ended: np.ndarray) -> None:
-        """Judge the policies of the slots whose training episode ended (one batched greedy
-        rollout) and record the episode."""
+        """Record the training episodes that ended and queue their policies for a greedy
+        evaluation (the trained Actor and Critic as they are now; the start during the
+        warm-up, when the Actor still is the start)."""
         hp = self.hp
         slots = np.flatnonzero(ended)
         trained = self.updates[slots] > 0
         candidate = trained | hp.count_start
-        flat_actor = self.learner.actor_flat() if trained.any() else None
-        judged = slots[candidate]
-        scores = (np.array([]), np.array([]))
-        if judged.size:  # during the warm-up the Actor still is the start
-            thetas = [
-                flat_actor[i] if self.updates[i] > 0 else self.searches[i].theta for i in judged
-            ]
-            scores = greedy_scores(self.a_spec, np.stack(thetas), self.env_config, hp.eval_seed)
+        flat_actor = flat_critic = None
+        if trained[candidate].any():
+            flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
         counts = np.maximum(self.loss_count[slots], 1)
         loss_means = (
             self.loss_sum[:, torch.as_tensor(slots, device=self.device)].cpu().numpy() / counts
         )
-        flat_critic = None
         now = time.perf_counter()
-        judged_index = {slot: j for j, slot in enumerate(judged)}
         for j, slot in enumerate(slots):
             search = self.searches[slot]
-            score = (np.nan, np.nan)
-            if slot in judged_index:
-                jj = judged_index[slot]
-                score = (float(scores[0][jj]), float(scores[1][jj]))
-                if is_improvement(score, search.best, hp.plateau_tiebreak):
-                    search.best = score
-                    search.result.fitness = score[0]
-                    if self.updates[slot] > 0:
-                        if flat_critic is None:
-                            flat_critic = self.learner.critic_flat()
-                        search.result.theta = flat_actor[slot].copy()
-                        search.result.omega = flat_critic[slot].copy()
-                    else:
-                        search.result.theta = search.theta.copy()
-                        search.result.omega = search.omega.copy()
-                    self.last_improvement[slot] = self.steps[slot]
             no_losses = self.loss_count[slot] == 0
-            search.result.history.append(
-                EpisodeRecord(
-                    episode=int(self.episodes[slot]),
-                    env_steps=int(self.steps[slot]),
-                    episode_return=float(self.episode_return[slot]),
-                    episode_length=int(self.sim.step_count[slot]),
-                    greedy_fitness=score[0],
-                    greedy_return=score[1],
-                    critic_loss=np.nan if no_losses else float(loss_means[0, j]),
-                    actor_loss=np.nan if no_losses else float(loss_means[1, j]),
-                    seconds=now - search.started,
-                )
+            record = EpisodeRecord(
+                episode=int(self.episodes[slot]),
+                env_steps=int(self.steps[slot]),
+                episode_return=float(self.episode_return[slot]),
+                episode_length=int(self.sim.step_count[slot]),
+                greedy_fitness=np.nan,
+                greedy_return=np.nan,
+                critic_loss=np.nan if no_losses else float(loss_means[0, j]),
+                actor_loss=np.nan if no_losses else float(loss_means[1, j]),
+                seconds=now - search.started,
             )
+            search.result.history.append(record)
+            if candidate[j]:
+                if trained[j]:
+                    policy = (flat_actor[slot].copy(), flat_critic[slot].copy())
+                else:
+                    policy = (search.theta, search.omega)
+                self.pending.append((search, record, *policy))
+                search.pending += 1
         self.episodes[slots] += 1
         self.episode_return[slots] = 0.0
         self.loss_count[slots] = 0
         self.loss_sum[:, torch.as_tensor(slots, device=self.device)] = 0.0
+
+    def _judge_pending(self) -> None:
+        """Greedy-evaluate every queued policy in one batched rollout and apply the results
+        in episode order: a better score keeps that episode's parameters and moves the
+        search's last improvement to that episode's end. Deferring changes nothing: a
+        search's queue is judged before any decision that depends on it (its stop), and a
+        policy scores the same whenever and with whatever it is evaluated."""
+        if not self.pending:
+            return
+        thetas = np.stack([entry[2] for entry in self.pending])
+        fitness, returns = greedy_scores(self.a_spec, thetas, self.env_config, self.hp.eval_seed)
+        slot_of = {id(search): slot for slot, search in enumerate(self.searches) if search}
+        for (search, record, theta, omega), f, r in zip(
+            self.pending, fitness, returns, strict=True
+        ):
+            score = (float(f), float(r))
+            record.greedy_fitness, record.greedy_return = score
+            search.pending -= 1
+            if is_improvement(score, search.best, self.hp.plateau_tiebreak):
+                search.best = score
+                search.result.fitness = score[0]
+                search.result.theta, search.result.omega = theta.copy(), omega.copy()
+                self.last_improvement[slot_of[id(search)]] = record.env_steps
+        self.pending = []
 
     def _stop(self, stop: np.ndarray, stale: np.ndarray) -> list[tuple[Any, LocalSearchResult]]:
         """Finish the searches of the ``stop`` slots and free them."""
