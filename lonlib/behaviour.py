@@ -235,10 +235,19 @@ def _robustness(
 ) -> np.ndarray:
     """Fitness of ``policy`` from ``starts`` copies of the nominal ``start`` state
     (``[4, 1, n]``: x, x_dot, phi, phi_dot) each perturbed by U[-noise, noise], one batch."""
+    n = config.n_carts
     sim = CoupledPendulums(config, starts)
-    draws = np.random.default_rng(seed).uniform(-noise, noise, size=(4, starts, config.n_carts))
-    default = np.stack([sim.x, sim.x_dot, sim.phi, sim.phi_dot])  # the noise-free start
-    sim.reset(noise=start - default + draws)
+    draws = np.random.default_rng(seed).uniform(-noise, noise, size=(4, starts, n))
+    # reset() adds its noise to the noise-free start (not to the constructor's noisy one)
+    base = np.stack(
+        [
+            np.broadcast_to(config.initial_positions(), (starts, n)),
+            np.zeros((starts, n)),
+            np.full((starts, n), config.initial_angle),
+            np.zeros((starts, n)),
+        ]
+    )
+    sim.reset(noise=start - base + draws)
     while not sim.done.all():
         sim.step(policy(sim.observe()))
     return sim.fitness.copy()

@@ -104,6 +104,7 @@ class DDPGConfig:
             check_range(name, getattr(self, name), 1)
         check_range("min_steps", self.min_steps, 0)
         check_range("threads", self.threads, 1, 256)
+        check_range("buffer_size", self.buffer_size, 1, 2**31 - 1)
         check_range("noise_std", self.noise_std, 0.0, 1.0)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
         check_range("gamma", self.gamma, 0.0, 1.0)
@@ -228,6 +229,26 @@ def local_search_batch(
 
 
 JUDGE_BATCH = 16  # at most this many queued greedy evaluations per batched rollout
+# Minibatch sizes that keep a batched agent's update bit-identical to its update alone
+# (measured: sizes that are not a multiple of 4 take other vector-loop paths by batch).
+BATCH_MULTIPLE = 8
+
+
+def check_device(device: str) -> None:
+    """Refuse, naming ``device``, a torch device this machine cannot compute on."""
+    kind = torch.device(device)
+    if kind.type == "cpu":
+        return
+    if kind.type == "cuda" and torch.cuda.is_available():
+        if kind.index is None or kind.index < torch.cuda.device_count():
+            return
+        raise ValueError(
+            f"device {device!r}: this machine has {torch.cuda.device_count()} CUDA device(s)"
+        )
+    raise ValueError(
+        f"device must be 'cpu' or, on a machine with a CUDA GPU, 'cuda[:index]'; got {device!r}"
+        + (" (torch sees no CUDA device here)" if kind.type == "cuda" else "")
+    )
 
 
 @dataclass
@@ -273,6 +294,12 @@ class SlotTrainer:
         k = len(seeds)
         if k < 1:
             raise ValueError("at least one local search is needed")
+        check_device(hp.device)
+        if k > 1 and hp.batch_size % BATCH_MULTIPLE:
+            raise ValueError(
+                f"batch_size must be a multiple of {BATCH_MULTIPLE} to train agents together "
+                f"(other sizes make an agent's bits depend on its batch), got {hp.batch_size}"
+            )
         n = env_config.n_carts
         self.env_config, self.hp, self.n = env_config, hp, n
         self.a_spec, self.c_spec = actor_spec(n), critic_spec(n)
@@ -299,7 +326,7 @@ class SlotTrainer:
         # ``judge_batch`` of them (or before a search they concern may stop).
         self.pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]] = []
         self.judge_batch = min(k, JUDGE_BATCH)
-        self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)), fresh=True)
+        self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
 
     @property
     def slots(self) -> int:
@@ -327,15 +354,17 @@ class SlotTrainer:
         by): parameters, targets, Adam state, replay buffer, streams and environment reset."""
         if not hasattr(self.learner, "reset_agent"):
             raise ValueError(f"the {self.hp.update!r} learner cannot refill slots; use 'lean'")
-        if any(self.busy[i] for i in slots):
-            raise ValueError(f"slots {list(slots)} are not all free")
+        if any(self.busy[i] for i in slots) or len(set(slots)) != len(slots):
+            raise ValueError(f"slots {list(slots)} are not all free and distinct")
+        if not len(slots) == len(seeds) == len(tags):
+            raise ValueError("start needs one seed and one tag per slot")
         thetas = check_parameters("theta", thetas, self.a_spec.n_params, len(slots))
         omegas = check_parameters("omega", omegas, self.c_spec.n_params, len(slots))
         for slot, theta, omega in zip(slots, thetas, omegas, strict=True):
             self.learner.reset_agent(slot, theta, omega)
-        self._start(list(slots), thetas, omegas, seeds, list(tags), fresh=False)
+        self._start(list(slots), thetas, omegas, seeds, list(tags))
 
-    def _start(self, slots, thetas, omegas, seeds, tags, fresh: bool) -> None:
+    def _start(self, slots, thetas, omegas, seeds, tags) -> None:
         now = time.perf_counter()
         start_scores = greedy_scores(self.a_spec, thetas, self.env_config, self.hp.eval_seed)
         for j, slot in enumerate(slots):
@@ -394,9 +423,8 @@ class SlotTrainer:
             )
             losses = self.learner.train(self.replay.sample(indices))
             self.dirty |= ~training
-            self.loss_sum += losses.to(torch.float64) * torch.as_tensor(
-                training, dtype=torch.float64, device=self.device
-            )
+            mask = torch.as_tensor(training, device=self.device)
+            self.loss_sum += torch.where(mask, losses.to(self.device, torch.float64), 0.0)
             self.loss_count += training
             self.updates += training
         # 4. episode ends: queue the greedy fitness of the trained Actors, reset

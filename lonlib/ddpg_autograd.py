@@ -105,7 +105,8 @@ class AutogradDDPG:
 
     def train(self, batch: tuple[torch.Tensor, ...]) -> torch.Tensor:
         """:meth:`update` with the losses as a ``[2, k]`` tensor."""
-        return torch.as_tensor(np.stack(self.update(batch)))
+        device = self.actor.tensors[0].device
+        return torch.as_tensor(np.stack(self.update(batch)), device=device)
 
     def act(self, obs: torch.Tensor) -> torch.Tensor:
         """Greedy actions ``[k, n]`` of the online Actors for one observation each ``[k, o]``."""

@@ -38,9 +38,10 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
     load_config,
     named_config,
 )
+from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
 from lonlib.lock import LockHeld, exclusive_lock
-from lonlib.lockstep import run_lockstep_processes
+from lonlib.lockstep import check_lockstep, run_lockstep_processes
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.progress import progress_bar
@@ -176,6 +177,9 @@ def run_experiment(
     slots = config.slots if slots is None else slots
     check_range("slots", slots, 1, 100_000)
     config = dataclasses.replace(config, executor=kind, slots=slots)  # what this session uses
+    check_device(config.ddpg.device)
+    if kind == "lockstep":
+        check_lockstep(config.ddpg, slots)
     out = Path(out)
     check_output_folder(out)
     with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from lonlib.basin_hopping import BasinHoppingRun, SearchRequest, local_optimum
-from lonlib.ddpg import SlotTrainer
+from lonlib.ddpg import BATCH_MULTIPLE, DDPGConfig, SlotTrainer
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.store import save_step
 from lonlib.validation import check_range
@@ -48,6 +48,20 @@ class _Run:
     driver: BasinHoppingRun
     lock: ExitStack
     request: SearchRequest | None = None
+
+
+def check_lockstep(hp: DDPGConfig, slots: int) -> None:
+    """Refuse, by name, settings the lockstep executor cannot run."""
+    check_range("slots", slots, 1, 100_000)
+    if hp.update != "lean":
+        raise ValueError(
+            f"the lockstep executor needs ddpg.update='lean' (slot refills), got {hp.update!r}"
+        )
+    if slots > 1 and hp.batch_size % BATCH_MULTIPLE:
+        raise ValueError(
+            f"ddpg.batch_size must be a multiple of {BATCH_MULTIPLE} for the lockstep executor "
+            f"(other sizes make a search's bits depend on its batch), got {hp.batch_size}"
+        )
 
 
 def run_lockstep(
@@ -71,25 +85,27 @@ def run_lockstep(
     """
     from lonlib.experiment import open_run, run_lock_path, run_summary
 
-    check_range("slots", slots, 1, 100_000)
-    if config.ddpg.update != "lean":
-        raise ValueError(
-            f"the lockstep executor needs ddpg.update='lean' (slot refills), "
-            f"got {config.ddpg.update!r}"
-        )
+    check_lockstep(config.ddpg, slots)
     out = Path(out)
     pending: deque[Job] = deque(jobs)
     active: dict[Job, _Run] = {}
 
-    def open_next() -> _Run | None:
-        """The next pending run that still needs a search, locked; None when none is left."""
+    deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
+
+    def open_next(block: bool = False) -> _Run | None:
+        """The next pending run that still needs a search, locked; None when none is left.
+        A run another process holds is reported (or, with ``wait``, deferred: waiting for
+        it here would stall every search in flight); ``block`` waits for the first one."""
         while pending:
             p, run = pending.popleft()
             lock = ExitStack()
             try:
-                lock.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=wait))
+                lock.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=block))
             except LockHeld as held:
-                on_done({"p": p, "run": run, "held_by": held.holder})
+                if wait:
+                    deferred.append((p, run))
+                else:
+                    on_done({"p": p, "run": run, "held_by": held.holder})
                 continue
             try:
                 driver = open_run(out, config, p, run)
@@ -104,13 +120,14 @@ def run_lockstep(
         return None
 
     def ask(run: _Run) -> _Run:
+        active[run.p, run.run] = run  # first, so that the lock is released if asking fails
         run.request = run.driver.next_search()
-        active[run.p, run.run] = run
         return run
 
-    try:
+    def batch(block_first: bool) -> None:
+        """Train until the pending runs are done (those held by others are deferred)."""
         first = []
-        while len(first) < slots and (run := open_next()) is not None:
+        while len(first) < slots and (run := open_next(block_first and not first)) is not None:
             first.append(ask(run))
         if not first:
             return
@@ -155,6 +172,13 @@ def run_lockstep(
                 rate = (steps - steps_at_tick) / (now - last_tick)
                 on_tick({"in_flight": int(trainer.busy.sum()), "env_steps/s": f"{rate:,.0f}"})
                 last_tick, steps_at_tick = now, steps
+
+    try:
+        batch(block_first=False)
+        while deferred:  # runs another process held: now wait for them, one batch at a time
+            pending.extend(deferred)
+            deferred.clear()
+            batch(block_first=True)
     finally:
         for run in active.values():
             run.lock.close()

@@ -10,6 +10,7 @@ import torch
 from lonlib.ddpg import (
     DDPGConfig,
     ReplayBuffer,
+    SlotTrainer,
     exploration_actions,
     greedy_score,
     is_improvement,
@@ -336,3 +337,73 @@ def test_ddpg_learns_a_task_untrained_policies_cannot_pass():
     for result in results:
         assert result.start_fitness == 0.0
         assert result.fitness >= LEARNING_THRESHOLD and result.improved
+
+
+def test_eight_two_cart_agents_together_equal_each_alone_bit_for_bit():
+    # 8 agents x 2 carts: the per-step action and noise arrays are long enough for vector
+    # loops (the SIMD padding of lonlib.random_streams and the act output must hold).
+    env = PendulumConfig(n_carts=2, steps=60, initial_noise=0.02, upright_angle=2.9)
+    hp = DDPGConfig(max_steps=260, patience_steps=10**6, **SMALL)
+    thetas, omegas = initial(2, 8, seed=3)
+    together = local_search_batch(thetas, omegas, env, hp, seeds=list(range(8)))
+    for i in (0, 5):
+        alone = local_search(thetas[i], omegas[i], env, hp, seed=i)
+        np.testing.assert_array_equal(together[i].theta, alone.theta)
+        returns = [h.episode_return for h in together[i].history]
+        assert returns == [h.episode_return for h in alone.history]
+
+
+def test_batch_sizes_that_break_batch_invariance_are_refused_for_several_agents():
+    thetas, omegas = initial(1, 2)
+    hp = DDPGConfig(**{**SMALL, "batch_size": 37})
+    with pytest.raises(ValueError, match="batch_size must be a multiple of 8"):
+        local_search_batch(thetas, omegas, PendulumConfig(n_carts=1), hp, seeds=[0, 1])
+    local_search(thetas[0], omegas[0], PendulumConfig(n_carts=1, steps=40), hp, seed=0)
+
+
+@pytest.mark.parametrize("device", ["meta", "cuda:99"])
+def test_a_device_this_machine_lacks_is_refused_by_name(device):
+    thetas, omegas = initial(1, 1)
+    hp = DDPGConfig(**{**SMALL, "device": device})
+    with pytest.raises(ValueError, match="device"):
+        local_search(thetas[0], omegas[0], PendulumConfig(n_carts=1), hp, seed=0)
+
+
+def test_start_noise_is_symmetric_and_within_its_level():
+    env = PendulumConfig(n_carts=2, initial_noise=0.05)
+    thetas, omegas = initial(2, 64)
+    trainer = SlotTrainer(thetas, omegas, list(range(64)), env, DDPGConfig(**SMALL))
+    offsets = trainer.sim.x - env.initial_positions()
+    assert np.abs(offsets).max() <= 0.05 and offsets.min() < -0.02 and offsets.max() > 0.02
+    angles = trainer.sim.phi - np.pi
+    assert np.abs(angles).max() <= 0.05 and angles.min() < -0.02 and angles.max() > 0.02
+
+
+def test_episode_losses_are_the_means_of_that_episodes_updates(monkeypatch):
+    env = PendulumConfig(n_carts=1, steps=40)
+    hp = DDPGConfig(max_steps=300, patience_steps=10**6, **SMALL)
+    thetas, omegas = initial(1, 1)
+    trainer = SlotTrainer(thetas, omegas, [4], env, hp)
+    seen = []
+    train = trainer.learner.train
+
+    def recording(batch):
+        losses = train(batch)
+        seen.append((int(trainer.steps[0]), losses[0, 0].item()))
+        return losses
+
+    monkeypatch.setattr(trainer.learner, "train", recording)
+    finished = []
+    while trainer.busy.any():
+        finished += trainer.step()
+    ((_, result),) = finished
+    start, checked = 0, 0
+    for record in result.history:
+        mine = [loss for step, loss in seen if start < step <= record.env_steps]
+        if mine:
+            assert record.critic_loss == pytest.approx(np.mean(mine), rel=1e-9)
+            checked += 1
+        else:
+            assert np.isnan(record.critic_loss)
+        start = record.env_steps
+    assert checked >= 3

@@ -7,6 +7,7 @@ import torch
 from lonlib.random_streams import (
     EXPLORATION_NOISE,
     REPLAY_SAMPLES,
+    START_NOISE,
     WARMUP_ACTIONS,
     CounterStreams,
     _TorchWords,
@@ -79,3 +80,14 @@ def test_the_torch_backend_draws_the_same_numbers_as_the_numpy_one():
 def test_bad_seeds_are_refused(seed):
     with pytest.raises(ValueError, match="seed must be an integer"):
         CounterStreams([seed])
+
+
+def test_no_two_purposes_share_draws_at_nearby_counters():
+    streams = CounterStreams([9])
+    purposes = (WARMUP_ACTIONS, EXPLORATION_NOISE, REPLAY_SAMPLES, START_NOISE)
+    words = {
+        (q, c): tuple(streams.uniform(q, np.array([c]), 2)[0].tolist())
+        for q in purposes
+        for c in range(64)
+    }
+    assert len(set(words.values())) == len(words)
