@@ -144,6 +144,7 @@ QUICK_DDPG = DDPGConfig(
     max_steps=40_000,
     min_steps=20_000,
     patience_steps=15_000,
+    plateau_tiebreak=True,
 )
 
 
