@@ -610,8 +610,8 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
 
     lines = [
         "| motor | integrator | reward | left zero | env steps to first > 0: median (range) "
-        "| best fitness (median best) | behaviours | best search: upright share / turns per "
-        "rod, end |",
+        "| best fitness (median best) | behaviours | best search's rollout: upright share and "
+        "full turns per rod, end |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for _, row in cells.iterrows():
@@ -625,8 +625,8 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
             f"| {motor} | {row['integrator']} | {row['reward']} "
             f"| {row['left_zero']} of {row['searches']} | {steps(row)} "
             f"| {row['best_fitness']:.3f} ({row['median_best_fitness']:.3f}) "
-            f"| {row['behaviours']} | {row['best_upright_share']} / {row['best_turns']}, "
-            f"{end} at {row['best_end_step']} |"
+            f"| {row['behaviours']} | upright {row['best_upright_share'].replace(' / ', ', ')}; "
+            f"turns {row['best_turns'].replace(' / ', ', ')}; {end} at {row['best_end_step']} |"
         )
     lines += ["", "| integrator | " + " | ".join(drift.columns[1:]) + " |"]
     lines.append("|---" * len(drift.columns) + "|")
@@ -661,6 +661,7 @@ def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) ->
     left.set_xlim(-0.02, 1.02)
     left.set_xlabel("best greedy fitness per search")
     right.set_xlabel("environment steps")
+    right.xaxis.set_major_formatter(plt.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
     right.set_ylabel("best greedy fitness so far")
     right.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
     fig.suptitle("Calibration: which physics lets DDPG leave zero")
