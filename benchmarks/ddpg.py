@@ -52,7 +52,7 @@ def make_update(kind: str, k: int, batch: int) -> Callable[[], object]:
     replay.data.uniform_()
     replay.data[..., -1] = (replay.data[..., -1] > 0.1).float()
     replay.size[:] = HP.buffer_size
-    sample = replay.sample(rng.integers(0, replay.size, (k, batch)))
+    sample = replay.sample(rng.integers(0, HP.buffer_size, (k, batch)))
     return lambda: learner.update(sample)
 
 

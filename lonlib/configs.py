@@ -148,7 +148,10 @@ QUICK_DDPG = DDPGConfig(
 )
 
 
-REFERENCE_RUNS = 20  # per p
+# Per p. The issue asked for >= 20; measured, a local search of the paper's DDPG costs ~3 ms
+# per env step on one core here (batch 2000), so 2 x 20 runs of ~8 searches x ~100k steps
+# would take ~27 core-hours: reduced to fit ~8 hours on 2 cores (README, "Reference").
+REFERENCE_RUNS = 6
 
 
 def named_config(name: str) -> ExperimentConfig:
@@ -180,7 +183,7 @@ def named_config(name: str) -> ExperimentConfig:
             max_local_searches=100,
             ddpg=DDPGConfig(),
             executor="lockstep",
-            slots=2 * REFERENCE_RUNS,
+            slots=REFERENCE_RUNS,
             note=f"reference: 2 x {REFERENCE_RUNS} runs, T = 5, the paper's DDPG and budget; "
             "the paper's algorithm with fewer runs than its 2 x 100",
         )
