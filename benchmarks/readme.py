@@ -1,7 +1,8 @@
-"""`python -m benchmarks.readme`: paste the generated DDPG speed table into README.md.
+"""`python -m benchmarks.readme`: paste the generated speed tables into README.md.
 
-`make bench` writes ``benchmarks/results/ddpg.md``; this replaces the README's lines between
-the ``ddpg-speed`` markers with it, so the table is never typed by hand.
+`make bench` writes ``benchmarks/results/ddpg.md`` and ``lockstep.md``; this replaces the
+README's lines between the ``ddpg-speed`` and ``lockstep-speed`` markers with them, so the
+tables are never typed by hand. A table whose result file is missing is left as it is.
 """
 
 from __future__ import annotations
@@ -13,18 +14,28 @@ from lonlib.readme_tables import splice as splice_between
 
 README = Path(__file__).parents[1] / "README.md"
 BEGIN, END = "<!-- ddpg-speed:begin (python -m benchmarks.readme) -->", "<!-- ddpg-speed:end -->"
+TABLES = {
+    "ddpg.md": (BEGIN, END),
+    "lockstep.md": (
+        "<!-- lockstep-speed:begin (python -m benchmarks.readme) -->",
+        "<!-- lockstep-speed:end -->",
+    ),
+}
 
 
 def splice(readme: str, table: str) -> str:
-    """``readme`` with the text between the markers replaced by ``table``."""
+    """``readme`` with the text between the DDPG markers replaced by ``table``."""
     return splice_between(readme, BEGIN, END, table)
 
 
 def main() -> None:
-    """Rewrite README.md's DDPG speed table from ``benchmarks/results/ddpg.md``."""
-    table = (RESULTS / "ddpg.md").read_text()
-    README.write_text(splice(README.read_text(), table))
-    print(f"README.md: DDPG speed table replaced from {RESULTS / 'ddpg.md'}")
+    """Rewrite README.md's speed tables from ``benchmarks/results/``."""
+    readme = README.read_text()
+    for name, (begin, end) in TABLES.items():
+        if (RESULTS / name).exists():
+            readme = splice_between(readme, begin, end, (RESULTS / name).read_text())
+            print(f"README.md: table replaced from {RESULTS / name}")
+    README.write_text(readme)
 
 
 if __name__ == "__main__":
