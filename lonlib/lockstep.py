@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import multiprocessing
+import os
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -207,7 +208,8 @@ def run_lockstep_processes(
     context = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(len(groups), mp_context=context) as pool:
         futures = [
-            pool.submit(_lockstep_group, str(out), config, group, slots, wait) for group in groups
+            pool.submit(_lockstep_group, str(out), config, group, slots, wait, os.getpid())
+            for group in groups
         ]
         pending = set(futures)
         try:
@@ -224,9 +226,16 @@ def run_lockstep_processes(
 
 
 def _lockstep_group(
-    out: str, config: Any, jobs: list[Job], slots: int, wait: bool
+    out: str, config: Any, jobs: list[Job], slots: int, wait: bool, parent: int
 ) -> list[dict[str, Any]]:
-    """One worker process's lockstep batch; the summaries of its runs."""
+    """One worker process's lockstep batch; the summaries of its runs. It stops (losing
+    only its searches in flight) when the process that started it has died."""
+
+    def stop_if_orphaned(_info: dict[str, Any]) -> None:
+        if os.getppid() != parent:  # the pool machinery would swallow an exception
+            print(f"lockstep worker {os.getpid()}: parent {parent} died; exiting", flush=True)
+            os._exit(1)  # the kernel releases the run locks; stored trials are complete
+
     summaries: list[dict[str, Any]] = []
-    run_lockstep(out, config, jobs, summaries.append, slots, wait)
+    run_lockstep(out, config, jobs, summaries.append, slots, wait, stop_if_orphaned)
     return summaries

@@ -404,3 +404,54 @@ def test_a_killed_dask_worker_is_replaced_and_its_run_resumes(reference, tmp_pat
     table = status(out)
     assert list(table["finished"]) == [2] and list(table["started"]) == [0]
     assert_progress_counts_each_run_once(capsys.readouterr().err, total=2)
+
+
+def test_lockstep_workers_stop_when_their_parent_is_killed_and_the_run_resumes(reference, tmp_path):
+    """`lonlib run --executor lockstep --workers 2` is SIGKILLed mid-run: its worker
+    processes notice within a few seconds and exit (no orphan keeps a run's lock or the
+    CPU), and a second session finishes the experiment."""
+    config = reference[0]
+    out = tmp_path / "out"
+    longer = dataclasses.replace(
+        config, ddpg=dataclasses.replace(config.ddpg, max_steps=3000, min_steps=3000)
+    )
+    path = tmp_path / "long.yaml"
+    path.write_text(yaml.safe_dump(longer.to_dict()))
+    command = [sys.executable, "-m", "lonlib", "run", str(path), "--out", str(out)]
+    lockstep = ["--executor", "lockstep", "--workers", "2", "--slots", "1", "--quiet"]
+    parent = subprocess.Popen([*command, *lockstep], start_new_session=True)
+    try:
+        _wait_for(lambda: _rows(trials_path(out, P, 0)) >= 1, what="a first local search")
+        children = _children(parent.pid)
+        assert len(children) >= 2
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait(timeout=30)
+        _wait_for(lambda: not any(_alive(c) for c in children), seconds=60, what="orphans")
+    finally:
+        os.killpg(parent.pid, signal.SIGKILL) if _alive(parent.pid) else None
+    for run in (0, 1):  # the locks are free again
+        with exclusive_lock(run_dir(out, P, run) / ".lock", wait=False):
+            pass
+    trials = run_experiment(longer, out, progress=False, executor="lockstep", workers=2)
+    assert sorted(trials.groupby("run").size()) == [SEARCHES, SEARCHES]
+
+
+def _children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (from /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return False
+    return fields[0] != "Z"
