@@ -31,6 +31,7 @@ TRAINING_REPEATS = max(1, (REPEATS + 1) // 2)
 LEAN_TRAINING, AUTOGRAD_TRAINING = "lonlib, lean update", "lonlib, autograd update"
 LEAN_256 = "lonlib, lean update, batch 256"
 SEARCH_TARGET_S = 45.0  # issue 12: a 150 000-step local search at batch 256, per agent
+SB3_TARGET = 3.0  # issue 12: SB3's DDPG at least this many times slower per agent-step
 SB3_TRAINING = "Stable-Baselines3 DDPG"
 
 
@@ -211,7 +212,12 @@ def markdown(update: list[dict], training: list[dict], load: tuple[float, float]
     lean, reference = seconds.get(LEAN_TRAINING), seconds.get(AUTOGRAD_TRAINING)
     sb3 = seconds.get(SB3_TRAINING)
     if lean and reference:
-        versus = f"; SB3 {sb3:.3g} s, {sb3 / lean:.2g}x the lean time" if sb3 else ""
+        met = "yes" if sb3 and sb3 / lean >= SB3_TARGET else "no"
+        versus = (
+            f"; SB3 {sb3:.3g} s, {sb3 / lean:.2g}x the lean time (target >= {SB3_TARGET:g}x: {met})"
+            if sb3
+            else ""
+        )
         lines.append(
             f"| 2000 training env-steps (k = 1, batch 2000) | {lean:.3g} s | {reference:.3g} s "
             f"| {reference / lean:.2g}x{versus} | |"
