@@ -63,7 +63,7 @@ def serial(tmp_path_factory):
     return stored(folder)
 
 
-@pytest.mark.parametrize("slots", [1, 3, 8])
+@pytest.mark.parametrize("slots", [3, 8])  # one slot: the resume test below
 def test_lockstep_trials_equal_the_serial_executors_bit_for_bit(serial, tmp_path, slots):
     run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=slots)
     trials, digest = stored(tmp_path)
@@ -97,7 +97,7 @@ def test_a_killed_lockstep_experiment_resumes_to_the_same_trials(serial, tmp_pat
     monkeypatch.undo()
     assert len(read_experiment_trials(tmp_path)) == 5
     # every run's lock was released: a second session resumes at once, with other slots
-    run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=3)
+    run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=1)
     trials, digest = stored(tmp_path)
     pd.testing.assert_frame_equal(trials, serial[0])
     assert digest.keys() == serial[1].keys()
