@@ -234,6 +234,16 @@ JUDGE_BATCH = 16  # at most this many queued greedy evaluations per batched roll
 BATCH_MULTIPLE = 8
 
 
+def check_batch_size(hp: DDPGConfig, agents: int) -> None:
+    """Refuse, naming ``batch_size``, a minibatch size that would make a batched agent's
+    bits depend on its batch (only when more than one agent trains)."""
+    if agents > 1 and hp.batch_size % BATCH_MULTIPLE:
+        raise ValueError(
+            f"batch_size must be a multiple of {BATCH_MULTIPLE} to train agents together "
+            f"(other sizes make an agent's bits depend on its batch), got {hp.batch_size}"
+        )
+
+
 def check_device(device: str) -> None:
     """Refuse, naming ``device``, a torch device this machine cannot compute on."""
     kind = torch.device(device)
@@ -295,11 +305,7 @@ class SlotTrainer:
         if k < 1:
             raise ValueError("at least one local search is needed")
         check_device(hp.device)
-        if k > 1 and hp.batch_size % BATCH_MULTIPLE:
-            raise ValueError(
-                f"batch_size must be a multiple of {BATCH_MULTIPLE} to train agents together "
-                f"(other sizes make an agent's bits depend on its batch), got {hp.batch_size}"
-            )
+        check_batch_size(hp, k)
         n = env_config.n_carts
         self.env_config, self.hp, self.n = env_config, hp, n
         self.a_spec, self.c_spec = actor_spec(n), critic_spec(n)

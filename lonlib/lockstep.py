@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from lonlib.basin_hopping import BasinHoppingRun, SearchRequest, local_optimum
-from lonlib.ddpg import BATCH_MULTIPLE, DDPGConfig, SlotTrainer
+from lonlib.ddpg import DDPGConfig, SlotTrainer, check_batch_size
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.store import save_step
 from lonlib.validation import check_range
@@ -58,11 +58,7 @@ def check_lockstep(hp: DDPGConfig, slots: int) -> None:
         raise ValueError(
             f"the lockstep executor needs ddpg.update='lean' (slot refills), got {hp.update!r}"
         )
-    if slots > 1 and hp.batch_size % BATCH_MULTIPLE:
-        raise ValueError(
-            f"ddpg.batch_size must be a multiple of {BATCH_MULTIPLE} for the lockstep executor "
-            f"(other sizes make a search's bits depend on its batch), got {hp.batch_size}"
-        )
+    check_batch_size(hp, slots)
 
 
 def run_lockstep(
