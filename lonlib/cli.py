@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
 import sys
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pandas as pd
 
 from lonlib.executors import EXECUTORS
 from lonlib.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
+from lonlib.validation import check_range
 
 
 def _run(args: argparse.Namespace) -> None:
@@ -28,6 +30,7 @@ def _run(args: argparse.Namespace) -> None:
     if changes:
         config = dataclasses.replace(config, **changes)  # validated again on construction
     out = Path(args.out) if args.out else Path("data") / config.name
+    check_range("checkpoint_minutes", args.checkpoint_minutes, 0.0, 1e7)
     trials = run_experiment(
         config,
         out,
@@ -36,6 +39,7 @@ def _run(args: argparse.Namespace) -> None:
         progress=not args.quiet,
         executor=args.executor,
         slots=args.slots,
+        checkpoint_seconds=args.checkpoint_minutes * 60 if args.checkpoint_minutes else None,
     )
     print(f"{len(trials)} local searches stored under {out}")
 
@@ -139,6 +143,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--slots", type=int, help="local searches per lockstep batch")
     run.add_argument("--device", help="torch device of DDPG, e.g. 'cpu' or 'cuda'")
+    run.add_argument(
+        "--checkpoint-minutes",
+        type=float,
+        default=10.0,
+        help="lockstep: write the batch in flight this often, to resume mid-search after a "
+        "kill (0: never; default 10)",
+    )
     run.add_argument("--out", help="output folder (default data/<name>)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
@@ -186,9 +197,21 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def show_lonlib_messages() -> None:
+    """Print lonlib's informational messages (a resumed batch, a stale checkpoint) on
+    stderr, once per process."""
+    logger = logging.getLogger("lonlib")
+    if not logger.handlers:
+        handler = logging.StreamHandler()
+        handler.setFormatter(logging.Formatter("lonlib: %(message)s"))
+        logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lonlib`` command."""
     args = build_parser().parse_args(argv)
+    show_lonlib_messages()
     try:
         args.func(args)
     except (ValueError, CorruptDataError, DataWriteError, MissingExperimentError) as error:

@@ -35,6 +35,7 @@ dropped from the batch (:meth:`SlotTrainer.shrink`).
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -334,6 +335,12 @@ class SlotTrainer:
         self.judge_batch = min(k, JUDGE_BATCH)
         self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickle (an in-flight checkpoint) with this process's torch threads set as the
+        batch's were: the thread count can change float reductions."""
+        self.__dict__.update(state)
+        torch.set_num_threads(self.hp.threads)
+
     @property
     def slots(self) -> int:
         """Number of slots ``K``."""
@@ -342,6 +349,17 @@ class SlotTrainer:
     def free_slots(self) -> list[int]:
         """Slots without a search."""
         return np.flatnonzero(~self.busy).tolist()
+
+    def tags(self) -> list[Any]:
+        """The tag of each slot's search (``None`` for a slot never filled)."""
+        return [search.tag if search else None for search in self.searches]
+
+    def resume_clocks(self, offset: float) -> None:
+        """Shift the searches' start times by ``offset`` seconds (a batch restored from an
+        in-flight checkpoint: ``seconds`` then counts training time, not time spent dead)."""
+        for search in self.searches:
+            if search is not None:
+                search.started += offset
 
     def results(self) -> list[LocalSearchResult]:
         """The results so far of the searches in progress."""
@@ -584,11 +602,26 @@ class SlotTrainer:
         keep = np.flatnonzero(self.busy).tolist()
         if len(keep) == self.slots or not keep or not hasattr(self.learner, "select"):
             return
+        self._keep(keep)
+
+    def subset(self, slots: Sequence[int]) -> SlotTrainer:
+        """A new trainer of only ``slots``, their searches continuing exactly as here (to
+        split a batch restored from an in-flight checkpoint over processes)."""
+        if not hasattr(self.learner, "select"):
+            raise ValueError(f"the {self.hp.update!r} learner cannot be split; use 'lean'")
+        part = copy.copy(self)
+        part._keep(list(slots))
+        return part
+
+    def _keep(self, keep: list[int]) -> None:
+        """Keep only the slots ``keep`` (new arrays: a shallow copy's are left untouched)."""
         self.learner = self.learner.select(keep)
         self.replay = self.replay.select(keep)
         self.streams = self.streams.select(keep)
         self.sim = self.sim.select(keep)
         self.searches = [self.searches[i] for i in keep]
+        kept = {id(search) for search in self.searches}
+        self.pending = [item for item in self.pending if id(item[0]) in kept]
         for name in (
             "busy",
             "steps",

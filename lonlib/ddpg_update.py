@@ -195,6 +195,13 @@ class LeanDDPG:
             self._actor_online, act_input, self._hidden(self.actor_layout, k, 1, act_size)
         )
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickle (an in-flight checkpoint): on the CPU the host Adam coefficients are the
+        device tensor's memory, which pickling copies apart, so join them again."""
+        self.__dict__.update(state)
+        if self._coefficients.device.type == "cpu":
+            self._coefficients_host = self._coefficients.numpy()
+
     # ----------------------------------------------------------------- parameters in and out
     def _internal(self, layout: _Layout, flat: np.ndarray) -> torch.Tensor:
         flat = torch.as_tensor(np.asarray(flat, dtype=np.float32))

@@ -40,8 +40,9 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
 )
 from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
+from lonlib.inflight import inflight_checkpoints, remove_inflight
 from lonlib.lock import LockHeld, exclusive_lock
-from lonlib.lockstep import check_lockstep, run_lockstep_processes
+from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep, run_lockstep_processes
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.progress import progress_bar
@@ -142,6 +143,15 @@ def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]
     return pending
 
 
+def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> None:
+    """Remove the in-flight checkpoints (:mod:`lonlib.inflight`) holding a run that has
+    ended since (it went on without them: they can never be resumed)."""
+    for checkpoint in inflight_checkpoints(out):
+        if not set(checkpoint.runs) <= set(todo):
+            log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.path)
+            remove_inflight(checkpoint.path)
+
+
 def run_experiment(
     config: ExperimentConfig,
     out: str | Path,
@@ -151,6 +161,7 @@ def run_experiment(
     max_attempts: int = 3,
     executor: str | None = None,
     slots: int | None = None,
+    checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
 ) -> pd.DataFrame:
     """Run every unfinished run of ``config`` into ``out``; return all trials.
 
@@ -160,7 +171,9 @@ def run_experiment(
     LocalCluster of ``workers`` processes; ``"lockstep"``: the local searches of up to
     ``slots`` runs trained as one batch (:mod:`lonlib.lockstep`; on the device
     ``config.ddpg.device``), in this process, or with ``workers`` > 1 one batch per worker
-    process, each over every ``workers``-th run. ``"auto"``: Dask if a scheduler is given,
+    process, each over its share of the runs; it writes its batch to an in-flight
+    checkpoint every ``checkpoint_seconds`` (``None``: never; :mod:`lonlib.inflight`) and
+    resumes from it. ``"auto"``: Dask if a scheduler is given,
     else a pool for ``workers`` > 1, else serial. Every executor gives a run the same
     trials. A run whose worker dies is retried (up to ``max_attempts``) and resumes from its
     last stored local search.
@@ -176,6 +189,8 @@ def run_experiment(
     kind = resolve_executor(executor or config.executor, workers, scheduler)
     slots = config.slots if slots is None else slots
     check_range("slots", slots, 1, 100_000)
+    if checkpoint_seconds is not None:
+        check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
     config = dataclasses.replace(config, executor=kind, slots=slots)  # what this session uses
     check_device(config.ddpg.device)
     if kind == "lockstep":
@@ -186,6 +201,7 @@ def run_experiment(
         remove_temporary_files(out, manifest_path(out).name)
         manifest = updated_manifest(config, out)
         todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
+        remove_finished_checkpoints(out, todo)
         if todo or not manifest_path(out).exists():  # a finished experiment stays untouched
             write_json(manifest_path(out), manifest)
     total = len(config.perturbations) * config.runs
@@ -215,6 +231,7 @@ def run_experiment(
                 workers,
                 wait,
                 lambda info: _refresh(bar, out, batch=info),
+                checkpoint_seconds=checkpoint_seconds,
             )
             return
         execute_runs(
@@ -238,6 +255,8 @@ def run_experiment(
             jobs = list(held)
             held.clear()
             execute(jobs, wait=True)
+        if todo:  # a batch that ended without resuming a checkpoint of its runs left it
+            remove_finished_checkpoints(out, pending_runs(config, out))
     finally:
         bar.close()
     return read_experiment_trials(out)
@@ -272,10 +291,15 @@ def _refresh(bar: tqdm, out: Path, done: int = 0, batch: dict | None = None) -> 
 
 def status(out: str | Path) -> pd.DataFrame:
     """Per p: runs finished, started (interrupted or running), not started; local searches,
-    best fitness. Reads the manifest for the planned runs."""
+    best fitness; searches in flight saved in lockstep checkpoints (:mod:`lonlib.inflight`)
+    and their env steps. Reads the manifest for the planned runs."""
     out = Path(out)
     manifest = read_manifest(out)
     config = ExperimentConfig.from_mapping(manifest["config"])
+    saved: dict[float, list[int]] = {}
+    for checkpoint in inflight_checkpoints(out):
+        for (p, _run), steps in zip(checkpoint.runs, checkpoint.steps, strict=True):
+            saved.setdefault(p, []).append(steps)
     rows = []
     for p in config.perturbations:
         bh = config.basin_hopping(p)
@@ -299,6 +323,8 @@ def status(out: str | Path) -> pd.DataFrame:
                 "not_started": config.runs - finished - started,
                 "local_searches": searches,
                 "best_fitness": best,
+                "saved_in_flight": len(saved.get(p, [])),
+                "saved_env_steps": sum(saved.get(p, [])),
             }
         )
     return pd.DataFrame(rows)

@@ -12,13 +12,15 @@ Every random number a search draws comes from its own ``(run seed, trial)`` stre
 reduction mixes slots, so a run's trials do not depend on ``K``, on its slot, or on the runs
 sharing the batch: on the CPU they are bit for bit the serial executor's (tested). Storage
 is the other executors' (:func:`lonlib.store.save_step` after every search, each run's lock
-held while it is in the batch): a killed lockstep experiment resumes and loses at most the
-searches in flight.
+held while it is in the batch), and every few minutes the whole batch is also written to an
+in-flight checkpoint (:mod:`lonlib.inflight`): a killed lockstep experiment resumes its
+searches in flight from there, losing at most the minutes since.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import logging
 import multiprocessing
 import os
 import time
@@ -33,11 +35,23 @@ import numpy as np
 
 from lonlib.basin_hopping import BasinHoppingRun, SearchRequest, local_optimum
 from lonlib.ddpg import DDPGConfig, SlotTrainer, check_batch_size
+from lonlib.inflight import (
+    InflightCheckpoint,
+    inflight_checkpoints,
+    load_inflight,
+    new_checkpoint_path,
+    remove_inflight,
+    save_inflight,
+    split_inflight,
+)
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.store import save_step
 from lonlib.validation import check_range
 
+log = logging.getLogger(__name__)
+
 Job = tuple[float, int]
+CHECKPOINT_SECONDS = 600.0  # how often a batch writes its in-flight checkpoint
 
 
 @dataclass
@@ -70,6 +84,7 @@ def run_lockstep(
     wait: bool = False,
     on_tick: Callable[[dict[str, Any]], None] | None = None,
     tick_seconds: float = 5.0,
+    checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
 ) -> None:
     """Run (or resume) the runs ``jobs`` of experiment ``config`` in ``out`` through one
     lockstep batch of at most ``slots`` local searches.
@@ -79,41 +94,53 @@ def run_lockstep(
     with ``held_by`` naming the holder (unless ``wait``: then its lock is waited for).
     ``on_tick(info)`` runs every ``tick_seconds`` for progress displays, with the searches
     in flight and the env steps per second of the batch since the last tick.
+
+    Every ``checkpoint_seconds`` (``None``: never) the batch is written to an in-flight
+    checkpoint (:mod:`lonlib.inflight`), kept in step with the stored trials after that;
+    a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
+    (it keeps the checkpoint's number of slots).
     """
     from lonlib.experiment import open_run, run_lock_path, run_summary
 
     check_lockstep(config.ddpg, slots)
+    if checkpoint_seconds is not None:
+        check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
     out = Path(out)
     pending: deque[Job] = deque(jobs)
     active: dict[Job, _Run] = {}
 
     deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
 
+    def lock_and_open(job: Job, block: bool) -> _Run:
+        """Run ``job`` locked, its driver resumed from storage (raises LockHeld)."""
+        p, run = job
+        lock = ExitStack()
+        lock.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=block))
+        try:
+            return _Run(p, run, open_run(out, config, p, run), lock)
+        except BaseException:
+            lock.close()
+            raise
+
     def open_next(block: bool = False) -> _Run | None:
         """The next pending run that still needs a search, locked; None when none is left.
         A run another process holds is reported (or, with ``wait``, deferred: waiting for
         it here would stall every search in flight); ``block`` waits for the first one."""
         while pending:
-            p, run = pending.popleft()
-            lock = ExitStack()
+            job = pending.popleft()
             try:
-                lock.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=block))
+                run = lock_and_open(job, block)
             except LockHeld as held:
                 if wait:
-                    deferred.append((p, run))
+                    deferred.append(job)
                 else:
-                    on_done({"p": p, "run": run, "held_by": held.holder})
+                    on_done({"p": job[0], "run": job[1], "held_by": held.holder})
                 continue
-            try:
-                driver = open_run(out, config, p, run)
-            except BaseException:
-                lock.close()
-                raise
-            if driver.finished:
-                lock.close()
-                on_done(run_summary(p, run, driver.state))
+            if run.driver.finished:
+                run.lock.close()
+                on_done(run_summary(run.p, run.run, run.driver.state))
                 continue
-            return _Run(p, run, driver, lock)
+            return run
         return None
 
     def ask(run: _Run) -> _Run:
@@ -121,27 +148,70 @@ def run_lockstep(
         run.request = run.driver.next_search()
         return run
 
+    def restore() -> tuple[SlotTrainer, Path] | None:
+        """The batch of an in-flight checkpoint of pending runs, their runs made active."""
+        for checkpoint in inflight_checkpoints(out):
+            if checkpoint_seconds is None or not set(checkpoint.runs) <= set(pending):
+                continue
+            restored = _restore(checkpoint, lock_and_open, config)
+            if restored is None:
+                continue
+            trainer, runs = restored
+            for run in runs:
+                pending.remove((run.p, run.run))
+                active[run.p, run.run] = run
+            log.info(
+                "%s: resumed %d searches in flight (%s env steps) from %s",
+                out,
+                len(runs),
+                f"{checkpoint.env_steps:,}",
+                checkpoint.path.name,
+            )
+            return trainer, checkpoint.path
+        return None
+
+    def refill(trainer: SlotTrainer, runs: list[_Run]) -> None:
+        trainer.start(
+            trainer.free_slots()[: len(runs)],
+            np.stack([r.request.theta for r in runs]),
+            np.stack([r.request.omega for r in runs]),
+            [r.request.seed for r in runs],
+            [(r.p, r.run) for r in runs],
+        )
+
     def batch(block_first: bool) -> None:
         """Train until the pending runs are done (those held by others are deferred)."""
-        first = []
-        while len(first) < slots and (run := open_next(block_first and not first)) is not None:
-            first.append(ask(run))
-        if not first:
-            return
-        trainer = SlotTrainer(
-            np.stack([r.request.theta for r in first]),
-            np.stack([r.request.omega for r in first]),
-            [r.request.seed for r in first],
-            config.env,
-            config.ddpg,
-            tags=[(r.p, r.run) for r in first],
-        )
+        restored = restore()
+        if restored is not None:
+            trainer, checkpoint = restored
+            checkpoint_written = time.monotonic()
+            more = []
+            while len(more) < len(trainer.free_slots()) and (run := open_next()) is not None:
+                more.append(ask(run))
+            if more:
+                refill(trainer, more)
+        else:
+            first = []
+            while len(first) < slots and (run := open_next(block_first and not first)):
+                first.append(ask(run))
+            if not first:
+                return
+            trainer = SlotTrainer(
+                np.stack([r.request.theta for r in first]),
+                np.stack([r.request.omega for r in first]),
+                [r.request.seed for r in first],
+                config.env,
+                config.ddpg,
+                tags=[(r.p, r.run) for r in first],
+            )
+            checkpoint, checkpoint_written = None, time.monotonic()
         last_tick, steps_at_tick = time.monotonic(), 0
         steps = 0
         while trainer.busy.any():
             steps += int(trainer.busy.sum())
-            refill: list[_Run] = []
-            for tag, result in trainer.step():
+            refills: list[_Run] = []
+            ended = trainer.step()
+            for tag, result in ended:
                 run = active[tag]
                 optimum = local_optimum(result, config.env, config.ddpg)
                 run.driver.record(run.request, optimum, result.seconds)
@@ -153,22 +223,24 @@ def run_lockstep(
                     run = open_next()
                     if run is None:
                         continue
-                refill.append(ask(run))
-            if refill:
-                trainer.start(
-                    trainer.free_slots()[: len(refill)],
-                    np.stack([r.request.theta for r in refill]),
-                    np.stack([r.request.omega for r in refill]),
-                    [r.request.seed for r in refill],
-                    [(r.p, r.run) for r in refill],
-                )
+                refills.append(ask(run))
+            if refills:
+                refill(trainer, refills)
             elif not pending and not trainer.busy.all():
                 trainer.shrink()
             now = time.monotonic()
+            due = checkpoint_seconds is not None and now - checkpoint_written >= checkpoint_seconds
+            if trainer.busy.any() and (due or (ended and checkpoint is not None)):
+                checkpoint = checkpoint or new_checkpoint_path(out)
+                counts = {tag: len(run.driver.state.trials) for tag, run in active.items()}
+                save_inflight(checkpoint, trainer, counts)
+                checkpoint_written = now
             if on_tick is not None and now - last_tick >= tick_seconds:
                 rate = (steps - steps_at_tick) / (now - last_tick)
                 on_tick({"in_flight": int(trainer.busy.sum()), "env_steps/s": f"{rate:,.0f}"})
                 last_tick, steps_at_tick = now, steps
+        if checkpoint is not None:
+            remove_inflight(checkpoint)  # every run of the batch has ended
 
     try:
         batch(block_first=False)
@@ -181,6 +253,59 @@ def run_lockstep(
             run.lock.close()
 
 
+def _restore(
+    checkpoint: InflightCheckpoint, lock_and_open: Callable[[Job, bool], _Run], config: Any
+) -> tuple[SlotTrainer, list[_Run]] | None:
+    """Lock and open the runs of ``checkpoint`` and load its batch; ``None`` (locks released)
+    if a run is held by another process, or, with the checkpoint removed, if it is stale."""
+    runs: list[_Run] = []
+    try:
+        for job in checkpoint.runs:
+            runs.append(lock_and_open(job, False))
+        stale = _stored_trials_differ(checkpoint, runs)
+        if stale is None:
+            trainer = load_inflight(checkpoint, config.ddpg.device)
+            stale = _batch_differs(trainer, runs, config)
+            if stale is None:
+                return trainer, runs
+    except LockHeld:
+        stale = None
+    except ValueError as error:  # unreadable, or not what its metadata says
+        stale = str(error)
+    for run in runs:
+        run.lock.close()
+    if stale is not None:
+        log.warning("%s: stale in-flight checkpoint removed (%s)", checkpoint.path, stale)
+        remove_inflight(checkpoint.path)
+    return None
+
+
+def _stored_trials_differ(checkpoint: InflightCheckpoint, runs: list[_Run]) -> str | None:
+    """Why the checkpoint does not match its runs' stored trials, or ``None`` if it does."""
+    for run, trials in zip(runs, checkpoint.trials, strict=True):
+        if len(run.driver.state.trials) != trials or run.driver.finished:
+            stored = len(run.driver.state.trials)
+            return f"p={run.p} run {run.run} has {stored} trials stored, the batch had {trials}"
+    return None
+
+
+def _batch_differs(trainer: SlotTrainer, runs: list[_Run], config: Any) -> str | None:
+    """Why a restored batch cannot continue ``runs`` of ``config``, or ``None`` (then each
+    run's next request is set: the search its slot holds)."""
+    if trainer.hp != config.ddpg or trainer.env_config != config.env:
+        return "written with another DDPG or environment configuration"
+    slot_of = {tag: slot for slot, tag in enumerate(trainer.tags()) if trainer.busy[slot]}
+    for run in runs:
+        run.request = run.driver.next_search()
+        search = trainer.searches[slot_of[run.p, run.run]]
+        if not (
+            np.array_equal(search.theta, run.request.theta)
+            and np.array_equal(search.omega, run.request.omega)
+        ):
+            return f"p={run.p} run {run.run} asks for other start parameters"
+    return None
+
+
 def run_lockstep_processes(
     out: str | Path,
     config: Any,
@@ -191,20 +316,36 @@ def run_lockstep_processes(
     wait: bool = False,
     on_tick: Callable[[dict[str, Any]], None] | None = None,
     tick_seconds: float = 5.0,
+    checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
 ) -> None:
     """:func:`run_lockstep` in ``workers`` spawned processes, each a batch of up to
-    ``slots`` searches over every ``workers``-th job (for machines with a few cores and no
-    GPU: one lockstep batch per core). A run's trials are the same as in one batch."""
+    ``slots`` searches over its share of the jobs (for machines with a few cores and no
+    GPU: one lockstep batch per core). A process first gets the runs of one in-flight
+    checkpoint, if any, so that it resumes that batch; the other jobs are dealt out in turn.
+    A run's trials are the same as in one batch."""
     check_range("workers", workers, 1, 4096)
-    groups = [list(jobs[i::workers]) for i in range(workers)]
+    if checkpoint_seconds is not None:
+        spread_checkpoints(out, config, jobs, workers)
+    groups = split_jobs(out, jobs, workers, checkpoints=checkpoint_seconds is not None)
     groups = [group for group in groups if group]
     if len(groups) <= 1:
-        run_lockstep(out, config, jobs, on_done, slots, wait, on_tick, tick_seconds)
+        run_lockstep(
+            out, config, jobs, on_done, slots, wait, on_tick, tick_seconds, checkpoint_seconds
+        )
         return
     context = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(len(groups), mp_context=context) as pool:
         futures = [
-            pool.submit(_lockstep_group, str(out), config, group, slots, wait, os.getpid())
+            pool.submit(
+                _lockstep_group,
+                str(out),
+                config,
+                group,
+                slots,
+                wait,
+                os.getpid(),
+                checkpoint_seconds,
+            )
             for group in groups
         ]
         pending = set(futures)
@@ -221,17 +362,83 @@ def run_lockstep_processes(
             raise
 
 
+def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], workers: int) -> None:
+    """Split in-flight checkpoints of ``jobs`` until there is one per worker process (or
+    each holds one run), so that every process resumes searches; a checkpoint whose runs
+    another process holds is left alone."""
+    from lonlib.experiment import run_lock_path
+
+    wanted = set(jobs)
+    while True:
+        stored = [c for c in inflight_checkpoints(out) if set(c.runs) <= wanted]
+        if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
+            return
+        largest = stored[0]
+        with ExitStack() as locks:
+            try:
+                for p, run in largest.runs:
+                    locks.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=False))
+            except LockHeld:
+                return
+            try:
+                split_inflight(
+                    largest, min(workers - len(stored) + 1, len(largest.runs)), config.ddpg.device
+                )
+            except ValueError as error:
+                log.warning("%s: unreadable in-flight checkpoint removed (%s)", largest.path, error)
+                remove_inflight(largest.path)
+
+
+def split_jobs(
+    out: str | Path, jobs: Sequence[Job], workers: int, checkpoints: bool = True
+) -> list[list[Job]]:
+    """``jobs`` dealt to ``workers`` processes: with ``checkpoints``, each of the first gets
+    the runs of one in-flight checkpoint of ``out`` (whose runs are all in ``jobs``) first;
+    then the other jobs go in turn to the process with the fewest."""
+    groups: list[list[Job]] = [[] for _ in range(workers)]
+    taken: set[Job] = set()
+    wanted = set(jobs)
+    stored = [c for c in inflight_checkpoints(out) if set(c.runs) <= wanted] if checkpoints else []
+    for group, checkpoint in zip(groups, stored, strict=False):
+        if taken.isdisjoint(checkpoint.runs):
+            group.extend(checkpoint.runs)
+            taken.update(checkpoint.runs)
+    for job in jobs:
+        if job not in taken:
+            min(groups, key=len).append(job)
+    return groups
+
+
 def _lockstep_group(
-    out: str, config: Any, jobs: list[Job], slots: int, wait: bool, parent: int
+    out: str,
+    config: Any,
+    jobs: list[Job],
+    slots: int,
+    wait: bool,
+    parent: int,
+    checkpoint_seconds: float | None,
 ) -> list[dict[str, Any]]:
     """One worker process's lockstep batch; the summaries of its runs. It stops (losing
-    only its searches in flight) when the process that started it has died."""
+    only its searches in flight since its last checkpoint) when the process that started
+    it has died."""
 
     def stop_if_orphaned(_info: dict[str, Any]) -> None:
         if os.getppid() != parent:  # the pool machinery would swallow an exception
             print(f"lockstep worker {os.getpid()}: parent {parent} died; exiting", flush=True)
             os._exit(1)  # the kernel releases the run locks; stored trials are complete
 
+    from lonlib.cli import show_lonlib_messages
+
+    show_lonlib_messages()  # a spawned process: its messages would be lost otherwise
     summaries: list[dict[str, Any]] = []
-    run_lockstep(out, config, jobs, summaries.append, slots, wait, stop_if_orphaned)
+    run_lockstep(
+        out,
+        config,
+        jobs,
+        summaries.append,
+        slots,
+        wait,
+        stop_if_orphaned,
+        checkpoint_seconds=checkpoint_seconds,
+    )
     return summaries

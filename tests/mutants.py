@@ -173,21 +173,39 @@ MUTANTS = [
     ),
     Mutant(
         LOCKSTEP,
-        "trainer.free_slots()[: len(refill)],",
-        "trainer.free_slots()[:1] * len(refill),",
+        "trainer.free_slots()[: len(runs)],",
+        "trainer.free_slots()[:1] * len(runs),",
         "two refills land in one slot",
+    ),
+    Mutant(
+        DDPG,
+        "self.pending = [item for item in self.pending if id(item[0]) in kept]",
+        "self.pending = list(self.pending)",
+        "a split batch judges the other part's queued policies",
+    ),
+    Mutant(
+        LEAN,
+        "self._coefficients_host = self._coefficients.numpy()",
+        "self._coefficients_host = self._coefficients.numpy().copy()",
+        "a restored batch's Adam step sizes stop following its step counts",
+    ),
+    Mutant(
+        LOCKSTEP,
+        "if len(run.driver.state.trials) != trials or run.driver.finished:",
+        "if run.driver.finished:",
+        "a checkpoint older than the stored trials is resumed",
     ),
     # --- DDPG: what F returns
     Mutant(
         DDPG,
-        "                        search.result.theta = flat_actor[slot].copy()\n",
-        "                        search.result.theta = search.theta.copy()\n",
+        "search.result.theta, search.result.omega = theta.copy(), omega.copy()",
+        "search.result.theta, search.result.omega = search.theta.copy(), omega.copy()",
         "start Actor returned with the trained fitness",
     ),
     Mutant(
         DDPG,
-        "                        search.result.omega = flat_critic[slot].copy()\n",
-        "                        search.result.omega = search.omega.copy()\n",
+        "search.result.theta, search.result.omega = theta.copy(), omega.copy()",
+        "search.result.theta, search.result.omega = theta.copy(), search.omega.copy()",
         "start Critic returned",
     ),
     Mutant(DDPG, "count_start: bool = False", "count_start: bool = True", "start counted"),
@@ -217,8 +235,8 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "                    self.last_improvement[slot] = self.steps[slot]\n",
-        "",
+        "self.last_improvement[slot_of[id(search)]] = record.env_steps",
+        "pass",
         "patience never reset by an improvement",
     ),
     Mutant(

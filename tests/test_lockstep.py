@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from lonlib.ddpg import DDPGConfig
-from lonlib.experiment import ExperimentConfig, run_experiment
+from lonlib.experiment import ExperimentConfig, run_experiment, status
 from lonlib.pendulum import PendulumConfig
 from lonlib.store import read_experiment_trials
 
@@ -159,8 +159,164 @@ def test_cli_runs_the_lockstep_executor(tmp_path, capsys):
     assert len(read_experiment_trials(tmp_path / "out")) >= 2
 
 
-def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path):
+def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, monkeypatch, capfd):
+    from lonlib.inflight import inflight_checkpoints
+
+    # Killed in one process, resumed in two: its checkpoint is split, one part per process.
+    kill_after_checkpoints(monkeypatch, writes=100)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(
+            CONFIG, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
+        )
+    monkeypatch.undo()
+    capfd.readouterr()
     run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=3, workers=2)
+    assert capfd.readouterr().err.count("resumed 2 searches in flight (200 env steps)") == 2
+    assert not inflight_checkpoints(tmp_path)
     trials, digest = stored(tmp_path)
     pd.testing.assert_frame_equal(trials, serial[0])
     assert digest.keys() == serial[1].keys()
+
+
+def kill_after_checkpoints(monkeypatch, writes):
+    """Make the lockstep executor die right after its ``writes``-th in-flight checkpoint."""
+    import lonlib.lockstep
+
+    save = lonlib.lockstep.save_inflight
+    calls = []
+
+    def save_then_die(*args, **kwargs):
+        save(*args, **kwargs)
+        calls.append(args[0])
+        if len(calls) == writes:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(lonlib.lockstep, "save_inflight", save_then_die)
+
+
+def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
+    serial, tmp_path, monkeypatch, caplog
+):
+    from lonlib.inflight import inflight_checkpoints
+
+    kill_after_checkpoints(monkeypatch, writes=150)  # every step writes one: mid-search
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(
+            CONFIG, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
+        )
+    monkeypatch.undo()
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    assert len(checkpoint.runs) == 4 and checkpoint.steps == (150,) * 4
+    table = status(tmp_path).set_index("p")
+    assert table["saved_in_flight"].sum() == 4
+    assert table["saved_env_steps"].sum() == 600
+    assert read_experiment_trials(tmp_path).empty  # nothing stored: all was in flight
+    with caplog.at_level("INFO", logger="lonlib.lockstep"):
+        run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=4)
+    assert "resumed 4 searches in flight (600 env steps)" in caplog.text
+    trials, digest = stored(tmp_path)
+    pd.testing.assert_frame_equal(trials, serial[0])
+    for key, value in digest.items():
+        if isinstance(value, pd.DataFrame):
+            pd.testing.assert_frame_equal(value, serial[1][key], check_exact=True)
+        else:
+            assert value == serial[1][key], key
+    assert not list((tmp_path / ".inflight").iterdir())  # the finished batch removed it
+
+
+def test_a_stale_checkpoint_is_reported_removed_and_the_runs_restart(
+    serial, tmp_path, monkeypatch, caplog
+):
+    import json
+
+    from lonlib.inflight import inflight_checkpoints
+
+    config = dataclasses.replace(CONFIG, perturbations=(1e-3,), runs=2)
+    kill_after_checkpoints(monkeypatch, writes=100)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(
+            config, tmp_path, progress=False, executor="lockstep", slots=2, checkpoint_seconds=0
+        )
+    monkeypatch.undo()
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    meta["trials"][0] += 1  # as if its first run had stored a trial after the write
+    checkpoint.metadata_path.write_text(json.dumps(meta))
+    with caplog.at_level("INFO", logger="lonlib.lockstep"):
+        run_experiment(config, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert "stale in-flight checkpoint removed" in caplog.text
+    assert "resumed" not in caplog.text
+    want = serial[0][(serial[0]["p"] == 1e-3) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+
+
+def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
+    from lonlib.lockstep import split_jobs
+
+    folder = tmp_path / ".inflight"
+    folder.mkdir()
+    (folder / "a.json").write_text(
+        '{"write_id": "x", "saved": 0, "runs": [[0.001, 3], [0.0001, 0]], "trials": [2, 0],'
+        ' "steps": [10, 5]}'
+    )
+    jobs = [(0.001, run) for run in range(4)] + [(0.0001, run) for run in range(4)]
+    groups = split_jobs(tmp_path, jobs, workers=2)
+    assert groups[0][:2] == [(0.001, 3), (0.0001, 0)]
+    assert sorted(groups[0] + groups[1]) == sorted(jobs)
+    assert abs(len(groups[0]) - len(groups[1])) <= 1
+    assert split_jobs(tmp_path, jobs, workers=2, checkpoints=False)[0][0] == (0.001, 0)
+
+
+def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
+    serial, tmp_path, monkeypatch, caplog
+):
+    from lonlib.inflight import inflight_checkpoints, split_inflight
+
+    kill_after_checkpoints(monkeypatch, writes=120)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(
+            CONFIG, tmp_path, progress=False, executor="lockstep", slots=8, checkpoint_seconds=0
+        )
+    monkeypatch.undo()
+    (whole,) = inflight_checkpoints(tmp_path)
+    split_inflight(whole, parts=3)
+    parts = inflight_checkpoints(tmp_path)
+    assert sorted(len(part.runs) for part in parts) == [2, 3, 3]
+    assert sorted(run for part in parts for run in part.runs) == sorted(whole.runs)
+    assert all(part.steps == (120,) * len(part.runs) for part in parts)
+    with caplog.at_level("INFO", logger="lonlib.lockstep"):  # one process: one part resumed
+        run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=8)
+    assert "resumed 3 searches in flight (360 env steps)" in caplog.text
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], serial[0])
+    assert not inflight_checkpoints(tmp_path)  # the parts left behind went with their runs
+
+
+def test_a_subset_of_a_batch_continues_its_searches_exactly():
+    from lonlib.ddpg import SlotTrainer
+    from lonlib.nets import actor_spec, critic_spec
+
+    rng = np.random.default_rng(0)
+    k = 3
+    thetas = rng.uniform(-0.3, 0.3, (k, actor_spec(1).n_params))
+    omegas = rng.uniform(-0.3, 0.3, (k, critic_spec(1).n_params))
+    whole = SlotTrainer(thetas, omegas, [5, 6, 7], CONFIG.env, CONFIG.ddpg, tags="abc")
+    whole.judge_batch = 100  # greedy evaluations stay queued: the subset must take its own
+    for _ in range(130):
+        assert not whole.step()
+    assert {id(item[0]) for item in whole.pending} >= {id(s) for s in whole.searches}
+    part = whole.subset([0, 2])
+
+    def finish(trainer):
+        ended = {}
+        while trainer.busy.any():
+            for tag, result in trainer.step():
+                ended[tag] = result
+        return ended
+
+    got, want = finish(part), finish(whole)
+    assert got.keys() == {"a", "c"}
+    for tag, result in got.items():
+        assert result.fitness == want[tag].fitness and result.env_steps == want[tag].env_steps
+        np.testing.assert_array_equal(result.theta, want[tag].theta)
+        strip = [{**vars(r), "seconds": 0} for r in result.history]
+        assert strip == [{**vars(r), "seconds": 0} for r in want[tag].history]
