@@ -99,9 +99,8 @@ def _analyse(args: argparse.Namespace) -> None:
 
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import (
-        README_BEGIN,
-        README_END,
         load_calibration,
+        readme_markers,
         run_calibration,
         with_overrides,
     )
@@ -109,13 +108,14 @@ def _calibrate(args: argparse.Namespace) -> None:
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
     readme = Path(args.readme) if args.readme else None
+    begin, end = readme_markers(config.name)
     if readme is not None:  # refuse a README without the markers before any work
-        splice(readme.read_text(), README_BEGIN, README_END, "")
+        splice(readme.read_text(), begin, end, "")
     result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
     if readme is not None:
         table = (Path(args.out) / "calibration.md").read_text()
         body = f"*Generated from `{args.out}` by `lonlib calibrate`.*\n\n{table}"
-        readme.write_text(splice(readme.read_text(), README_BEGIN, README_END, body))
+        readme.write_text(splice(readme.read_text(), begin, end, body))
         print(f"calibration table pasted into {readme}")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(result.cells.drop(columns=["seconds"]).to_string(index=False))

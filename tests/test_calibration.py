@@ -93,6 +93,19 @@ def test_first_nonzero_step_is_read_from_the_training_history(tiny_study):
             assert search["first_nonzero_steps"] == (nonzero[0] if nonzero else None)
 
 
+def test_history_summary_finds_the_first_nonzero_and_the_first_balancing_policy():
+    from lonlib.calibration import BALANCING_FITNESS, history_summary
+
+    steps = [100, 200, 300, 400, 500]
+    fitness = [float("nan"), 0.0, 0.3, BALANCING_FITNESS, 0.5]
+    assert history_summary(steps, fitness) == {
+        "best_fitness": BALANCING_FITNESS,
+        "first_nonzero_steps": 300,
+        "first_balancing_steps": 400,
+    }
+    assert history_summary(steps[:3], fitness[:3])["first_balancing_steps"] is None
+
+
 def test_drift_table_shows_explicit_euler_pumping_energy(tiny_study):
     _, out = tiny_study
     drift = pd.read_csv(out / "drift.csv").set_index("integrator")
@@ -258,10 +271,15 @@ def test_notebook_runs_the_tiny_grid(tmp_path):
 def test_episodes_before_the_first_update_do_not_hide_the_best_fitness():
     nan = float("nan")
     summary = calibration.history_summary([40, 80, 120, 160], [nan, 0.0, 0.25, 0.1])
-    assert summary == {"best_fitness": 0.25, "first_nonzero_steps": 120}
+    assert summary == {
+        "best_fitness": 0.25,
+        "first_nonzero_steps": 120,
+        "first_balancing_steps": None,
+    }
     assert calibration.history_summary([40], [nan]) == {
         "best_fitness": 0.0,
         "first_nonzero_steps": None,
+        "first_balancing_steps": None,
     }
 
 
@@ -275,3 +293,20 @@ def test_a_warm_up_longer_than_an_episode_still_gives_a_best_fitness(tmp_path):
     table = calibration.search_table([record])
     assert table["best_fitness"].notna().all()
     assert (table["best_fitness"] > 0).any()
+
+
+def test_readme_gets_the_grids_table_between_its_own_markers(tiny_study, tmp_path):
+    _, out = tiny_study
+    readme = tmp_path / "README.md"
+    readme.write_text("intro\n<!-- calibration:begin -->\nnot ours\n<!-- calibration:end -->\n")
+    with pytest.raises(SystemExit):  # the tiny grid's markers are missing: refused at once
+        cli_main(["calibrate", "--grid", "tiny", "--quiet", "--readme", str(readme), str(out)])
+    readme.write_text(
+        readme.read_text()
+        + "<!-- calibration-tiny:begin -->\nold\n<!-- calibration-tiny:end -->\noutro\n"
+    )
+    cli_main(["calibrate", "--grid", "tiny", "--quiet", "--readme", str(readme), str(out)])
+    text = readme.read_text()
+    assert "not ours" in text and "old" not in text  # only the tiny grid's table changed
+    assert (out / "calibration.md").read_text().strip() in text
+    assert text.endswith("<!-- calibration-tiny:end -->\noutro\n")
