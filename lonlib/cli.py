@@ -30,7 +30,8 @@ def _run(args: argparse.Namespace) -> None:
     if changes:
         config = dataclasses.replace(config, **changes)  # validated again on construction
     out = Path(args.out) if args.out else Path("data") / config.name
-    check_range("checkpoint_minutes", args.checkpoint_minutes, 0.0, 1e7)
+    if args.checkpoint_minutes != 0:  # a write takes ~11 MB per slot: not every few steps
+        check_range("checkpoint_minutes (0 for never)", args.checkpoint_minutes, 1.0, 1e7)
     trials = run_experiment(
         config,
         out,
@@ -148,7 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=10.0,
         help="lockstep: write the batch in flight this often, to resume mid-search after a "
-        "kill (0: never; default 10)",
+        "kill (at least 1; 0: never write nor resume one; default 10)",
     )
     run.add_argument("--out", help="output folder (default data/<name>)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")

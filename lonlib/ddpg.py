@@ -604,6 +604,15 @@ class SlotTrainer:
             return
         self._keep(keep)
 
+    def drop(self, slots: Sequence[int]) -> None:
+        """Abandon the searches in ``slots`` (their slots become free; nothing is returned
+        for them): a batch restored from an in-flight checkpoint whose runs went on."""
+        dropped = {id(self.searches[slot]) for slot in slots}
+        self.pending = [item for item in self.pending if id(item[0]) not in dropped]
+        for slot in slots:
+            self.searches[slot] = None
+            self.busy[slot] = False
+
     def subset(self, slots: Sequence[int]) -> SlotTrainer:
         """A new trainer of only ``slots``, their searches continuing exactly as here (to
         split a batch restored from an in-flight checkpoint over processes)."""
@@ -614,7 +623,8 @@ class SlotTrainer:
         return part
 
     def _keep(self, keep: list[int]) -> None:
-        """Keep only the slots ``keep`` (new arrays: a shallow copy's are left untouched)."""
+        """Keep only the slots ``keep`` (new arrays and lists; the searches' bookkeeping
+        objects are shared with a shallow copy this was made from)."""
         self.learner = self.learner.select(keep)
         self.replay = self.replay.select(keep)
         self.streams = self.streams.select(keep)

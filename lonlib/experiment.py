@@ -17,6 +17,8 @@ import dataclasses
 import errno
 import logging
 import time
+from collections.abc import Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -97,6 +99,21 @@ def run_lock_path(out: Path, p: float, run: int) -> Path:
     return run_dir(Path(out), p, run) / RUN_LOCK
 
 
+@contextmanager
+def hold_runs(out: Path, runs: Sequence[tuple[float, int]]) -> Iterator[bool]:
+    """Hold the locks of ``runs`` for the ``with`` block, yielding True; yield False
+    (holding none) if another process holds one of them."""
+    with ExitStack() as locks:
+        try:
+            for p, run in runs:
+                locks.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=False))
+        except LockHeld:
+            locks.close()
+            yield False
+            return
+        yield True
+
+
 def open_run(out: Path, config: ExperimentConfig, p: float, run: int) -> BasinHoppingRun:
     """Algorithm 2's driver of run ``(p, run)``, resumed from what is stored (call with the
     run's lock held: a holder before us may have stored more than the caller saw)."""
@@ -145,11 +162,15 @@ def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]
 
 def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> None:
     """Remove the in-flight checkpoints (:mod:`lonlib.inflight`) holding a run that has
-    ended since (it went on without them: they can never be resumed)."""
+    ended since (it went on without them: they can never be resumed). A checkpoint whose
+    runs another process holds is left to it."""
     for checkpoint in inflight_checkpoints(out):
-        if not set(checkpoint.runs) <= set(todo):
-            log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.path)
-            remove_inflight(checkpoint.path)
+        if set(checkpoint.runs) <= set(todo):
+            continue
+        with hold_runs(out, checkpoint.runs) as held:
+            if held:
+                log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.name)
+                remove_inflight(checkpoint.metadata_path)
 
 
 def run_experiment(

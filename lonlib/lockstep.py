@@ -36,16 +36,18 @@ import numpy as np
 from lonlib.basin_hopping import BasinHoppingRun, SearchRequest, local_optimum
 from lonlib.ddpg import DDPGConfig, SlotTrainer, check_batch_size
 from lonlib.inflight import (
+    CheckpointUnreadable,
     InflightCheckpoint,
     inflight_checkpoints,
     load_inflight,
     new_checkpoint_path,
     remove_inflight,
+    remove_leftovers,
     save_inflight,
     split_inflight,
 )
 from lonlib.lock import LockHeld, exclusive_lock
-from lonlib.store import save_step
+from lonlib.store import DataWriteError, save_step
 from lonlib.validation import check_range
 
 log = logging.getLogger(__name__)
@@ -149,25 +151,30 @@ def run_lockstep(
         return run
 
     def restore() -> tuple[SlotTrainer, Path] | None:
-        """The batch of an in-flight checkpoint of pending runs, their runs made active."""
+        """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
+        continue made active (the others go back to the front of ``pending``)."""
         for checkpoint in inflight_checkpoints(out):
             if checkpoint_seconds is None or not set(checkpoint.runs) <= set(pending):
                 continue
             restored = _restore(checkpoint, lock_and_open, config)
             if restored is None:
                 continue
-            trainer, runs = restored
-            for run in runs:
+            trainer, kept, dropped = restored
+            for run in kept:
                 pending.remove((run.p, run.run))
                 active[run.p, run.run] = run
+            for job in reversed(dropped):  # they restart from their stored trials, first
+                pending.remove(job)
+                pending.appendleft(job)
             log.info(
-                "%s: resumed %d searches in flight (%s env steps) from %s",
+                "%s: resumed %d searches in flight (%s env steps) from %s%s",
                 out,
-                len(runs),
-                f"{checkpoint.env_steps:,}",
-                checkpoint.path.name,
+                len(kept),
+                f"{sum(int(trainer.steps[s]) for s in range(trainer.slots) if trainer.busy[s]):,}",
+                checkpoint.name,
+                f"; {len(dropped)} whose runs went on since restart" if dropped else "",
             )
-            return trainer, checkpoint.path
+            return trainer, checkpoint.metadata_path
         return None
 
     def refill(trainer: SlotTrainer, runs: list[_Run]) -> None:
@@ -230,10 +237,13 @@ def run_lockstep(
                 trainer.shrink()
             now = time.monotonic()
             due = checkpoint_seconds is not None and now - checkpoint_written >= checkpoint_seconds
-            if trainer.busy.any() and (due or (ended and checkpoint is not None)):
+            if due and trainer.busy.any():
                 checkpoint = checkpoint or new_checkpoint_path(out)
                 counts = {tag: len(run.driver.state.trials) for tag, run in active.items()}
-                save_inflight(checkpoint, trainer, counts)
+                try:
+                    save_inflight(checkpoint, trainer, counts)
+                except DataWriteError as error:  # a cache: the experiment goes on without it
+                    log.warning("in-flight checkpoint not written (%s)", error)
                 checkpoint_written = now
             if on_tick is not None and now - last_tick >= tick_seconds:
                 rate = (steps - steps_at_tick) / (now - last_tick)
@@ -255,55 +265,71 @@ def run_lockstep(
 
 def _restore(
     checkpoint: InflightCheckpoint, lock_and_open: Callable[[Job, bool], _Run], config: Any
-) -> tuple[SlotTrainer, list[_Run]] | None:
-    """Lock and open the runs of ``checkpoint`` and load its batch; ``None`` (locks released)
-    if a run is held by another process, or, with the checkpoint removed, if it is stale."""
+) -> tuple[SlotTrainer, list[_Run], list[Job]] | None:
+    """Lock and open the runs of ``checkpoint`` and load its batch: the trainer, the runs of
+    the slots that continue (locked) and those of the slots dropped because their runs went
+    on since the write (unlocked). ``None`` (every lock released) if a run is held by
+    another process, or the file cannot be read now or was trained with other settings
+    (kept), or if no slot continues or it cannot be unpickled here (removed: stale)."""
     runs: list[_Run] = []
+    stale = None
     try:
         for job in checkpoint.runs:
             runs.append(lock_and_open(job, False))
-        stale = _stored_trials_differ(checkpoint, runs)
-        if stale is None:
-            trainer = load_inflight(checkpoint, config.ddpg.device)
-            stale = _batch_differs(trainer, runs, config)
-            if stale is None:
-                return trainer, runs
+        remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
+        trainer = load_inflight(checkpoint, config.ddpg.device)
+        if trainer.hp != config.ddpg or trainer.env_config != config.env:
+            log.warning(
+                "%s: in-flight checkpoint trained with device=%r, threads=%d: resume with those "
+                "to continue it; its runs restart from their stored trials",
+                checkpoint.metadata_path,
+                trainer.hp.device,
+                trainer.hp.threads,
+            )
+            return None
+        dropped = _slots_gone_on(checkpoint, trainer, runs)
+        if len(dropped) < len(runs):
+            trainer.drop([slot for slot in dropped.values() if slot is not None])
+            kept = [run for run in runs if (run.p, run.run) not in dropped]
+            runs = [run for run in runs if (run.p, run.run) in dropped]  # unlocked below
+            return trainer, kept, list(dropped)
+        stale = "every run went on since it was written"
     except LockHeld:
-        stale = None
-    except ValueError as error:  # unreadable, or not what its metadata says
+        pass
+    except CheckpointUnreadable as error:
+        log.warning("%s: in-flight checkpoint skipped (%s)", checkpoint.metadata_path, error)
+    except ValueError as error:  # truncated, or written by another version
         stale = str(error)
-    for run in runs:
-        run.lock.close()
+    finally:
+        for run in runs:
+            run.lock.close()
     if stale is not None:
-        log.warning("%s: stale in-flight checkpoint removed (%s)", checkpoint.path, stale)
-        remove_inflight(checkpoint.path)
+        log.warning("%s: stale in-flight checkpoint removed (%s)", checkpoint.metadata_path, stale)
+        remove_inflight(checkpoint.metadata_path)
     return None
 
 
-def _stored_trials_differ(checkpoint: InflightCheckpoint, runs: list[_Run]) -> str | None:
-    """Why the checkpoint does not match its runs' stored trials, or ``None`` if it does."""
-    for run, trials in zip(runs, checkpoint.trials, strict=True):
-        if len(run.driver.state.trials) != trials or run.driver.finished:
-            stored = len(run.driver.state.trials)
-            return f"p={run.p} run {run.run} has {stored} trials stored, the batch had {trials}"
-    return None
-
-
-def _batch_differs(trainer: SlotTrainer, runs: list[_Run], config: Any) -> str | None:
-    """Why a restored batch cannot continue ``runs`` of ``config``, or ``None`` (then each
-    run's next request is set: the search its slot holds)."""
-    if trainer.hp != config.ddpg or trainer.env_config != config.env:
-        return "written with another DDPG or environment configuration"
+def _slots_gone_on(
+    checkpoint: InflightCheckpoint, trainer: SlotTrainer, runs: list[_Run]
+) -> dict[Job, int | None]:
+    """The runs (and their slots) whose stored trials or next search differ from what the
+    checkpoint's slot holds; every other run's next request is set (its slot's search)."""
     slot_of = {tag: slot for slot, tag in enumerate(trainer.tags()) if trainer.busy[slot]}
-    for run in runs:
+    gone: dict[Job, int | None] = {}
+    for run, trials in zip(runs, checkpoint.trials, strict=True):
+        job = (run.p, run.run)
+        slot = slot_of.get(job)
+        if slot is None or run.driver.finished or len(run.driver.state.trials) != trials:
+            gone[job] = slot
+            continue
         run.request = run.driver.next_search()
-        search = trainer.searches[slot_of[run.p, run.run]]
+        search = trainer.searches[slot]
         if not (
             np.array_equal(search.theta, run.request.theta)
             and np.array_equal(search.omega, run.request.omega)
         ):
-            return f"p={run.p} run {run.run} asks for other start parameters"
-    return None
+            gone[job] = slot
+    return gone
 
 
 def run_lockstep_processes(
@@ -366,7 +392,7 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
     """Split in-flight checkpoints of ``jobs`` until there is one per worker process (or
     each holds one run), so that every process resumes searches; a checkpoint whose runs
     another process holds is left alone."""
-    from lonlib.experiment import run_lock_path
+    from lonlib.experiment import hold_runs
 
     wanted = set(jobs)
     while True:
@@ -374,19 +400,20 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
         if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
             return
         largest = stored[0]
-        with ExitStack() as locks:
-            try:
-                for p, run in largest.runs:
-                    locks.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=False))
-            except LockHeld:
+        with hold_runs(out, largest.runs) as held:
+            if not held:
                 return
             try:
                 split_inflight(
                     largest, min(workers - len(stored) + 1, len(largest.runs)), config.ddpg.device
                 )
+            except CheckpointUnreadable as error:
+                log.warning("%s: not split (%s)", largest.metadata_path, error)
+                return
             except ValueError as error:
-                log.warning("%s: unreadable in-flight checkpoint removed (%s)", largest.path, error)
-                remove_inflight(largest.path)
+                path = largest.metadata_path
+                log.warning("%s: stale in-flight checkpoint removed (%s)", path, error)
+                remove_inflight(path)
 
 
 def split_jobs(

@@ -50,7 +50,10 @@ def check_range(
     high: float | None = None,
     low_open: bool = False,
 ) -> None:
-    """``low <= value <= high`` (``low < value`` when ``low_open``); either bound optional."""
+    """``low <= value <= high`` (``low < value`` when ``low_open``); either bound optional.
+    NaN is in no range."""
+    if value != value:
+        raise ValueError(f"{name} must be a number, got {value!r}")
     too_low = low is not None and (value <= low if low_open else value < low)
     too_high = high is not None and value > high
     if too_low or too_high:

@@ -191,9 +191,21 @@ MUTANTS = [
     ),
     Mutant(
         LOCKSTEP,
-        "if len(run.driver.state.trials) != trials or run.driver.finished:",
-        "if run.driver.finished:",
-        "a checkpoint older than the stored trials is resumed",
+        "if slot is None or run.driver.finished or len(run.driver.state.trials) != trials:",
+        "if slot is None or run.driver.finished:",
+        "a slot older than its run's stored trials is resumed",
+    ),
+    Mutant(
+        LOCKSTEP,
+        "np.array_equal(search.theta, run.request.theta)",
+        "True or np.array_equal(search.theta, run.request.theta)",
+        "a slot holding another start than its run asks for is resumed",
+    ),
+    Mutant(
+        LOCKSTEP,
+        "if trainer.hp != config.ddpg or trainer.env_config != config.env:",
+        "if trainer.env_config != config.env:",
+        "a batch trained with other threads or device is resumed",
     ),
     # --- DDPG: what F returns
     Mutant(

@@ -1,5 +1,6 @@
 """The lockstep executor: the same trials as the serial executor, whatever the batch."""
 
+import copy
 import dataclasses
 import hashlib
 
@@ -197,23 +198,34 @@ def kill_after_checkpoints(monkeypatch, writes):
 def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
     serial, tmp_path, monkeypatch, caplog
 ):
+    import lonlib.inflight
     from lonlib.inflight import inflight_checkpoints
 
-    kill_after_checkpoints(monkeypatch, writes=150)  # every step writes one: mid-search
+    writes = []
+    write = lonlib.inflight.atomic_write
+
+    def die_committing_the_150th(path, data):  # every step writes one: mid-search
+        writes.append(path)
+        if len(writes) == 2 * 150:  # its data file is written, its metadata is not
+            raise KeyboardInterrupt
+        write(path, data)
+
+    monkeypatch.setattr(lonlib.inflight, "atomic_write", die_committing_the_150th)
     with pytest.raises(KeyboardInterrupt):
         run_experiment(
             CONFIG, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
         )
     monkeypatch.undo()
-    (checkpoint,) = inflight_checkpoints(tmp_path)
-    assert len(checkpoint.runs) == 4 and checkpoint.steps == (150,) * 4
+    (checkpoint,) = inflight_checkpoints(tmp_path)  # the 149th, whole
+    assert len(checkpoint.runs) == 4 and checkpoint.steps == (149,) * 4
+    assert len(list((tmp_path / ".inflight").glob("*.pt"))) == 2  # the 149th and the 150th's
     table = status(tmp_path).set_index("p")
     assert table["saved_in_flight"].sum() == 4
-    assert table["saved_env_steps"].sum() == 600
+    assert table["saved_env_steps"].sum() == 4 * 149
     assert read_experiment_trials(tmp_path).empty  # nothing stored: all was in flight
     with caplog.at_level("INFO", logger="lonlib.lockstep"):
         run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=4)
-    assert "resumed 4 searches in flight (600 env steps)" in caplog.text
+    assert "resumed 4 searches in flight (596 env steps)" in caplog.text
     trials, digest = stored(tmp_path)
     pd.testing.assert_frame_equal(trials, serial[0])
     for key, value in digest.items():
@@ -221,33 +233,75 @@ def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
             pd.testing.assert_frame_equal(value, serial[1][key], check_exact=True)
         else:
             assert value == serial[1][key], key
-    assert not list((tmp_path / ".inflight").iterdir())  # the finished batch removed it
+    assert not list((tmp_path / ".inflight").iterdir())  # the finished batch removed it all
 
 
-def test_a_stale_checkpoint_is_reported_removed_and_the_runs_restart(
-    serial, tmp_path, monkeypatch, caplog
+SMALL = dataclasses.replace(CONFIG, perturbations=(1e-3,), runs=2)
+
+
+@pytest.mark.parametrize("change", ["trials", "start", "all", "truncated", "threads"])
+def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
+    serial, tmp_path, monkeypatch, caplog, change
 ):
     import json
 
-    from lonlib.inflight import inflight_checkpoints
+    from lonlib.inflight import inflight_checkpoints, load_inflight, save_inflight
 
-    config = dataclasses.replace(CONFIG, perturbations=(1e-3,), runs=2)
-    kill_after_checkpoints(monkeypatch, writes=100)
+    kill_after_checkpoints(monkeypatch, writes=70)
     with pytest.raises(KeyboardInterrupt):
         run_experiment(
-            config, tmp_path, progress=False, executor="lockstep", slots=2, checkpoint_seconds=0
+            SMALL, tmp_path, progress=False, executor="lockstep", slots=2, checkpoint_seconds=0
         )
     monkeypatch.undo()
     (checkpoint,) = inflight_checkpoints(tmp_path)
-    meta = json.loads(checkpoint.metadata_path.read_text())
-    meta["trials"][0] += 1  # as if its first run had stored a trial after the write
-    checkpoint.metadata_path.write_text(json.dumps(meta))
+    if change in ("trials", "all"):  # as if runs had stored a trial after the write
+        meta = json.loads(checkpoint.metadata_path.read_text())
+        meta["trials"] = [n + 1 for n in meta["trials"]]
+        if change == "trials":
+            meta["trials"][1] -= 1
+        checkpoint.metadata_path.write_text(json.dumps(meta))
+    elif change == "truncated":
+        data = checkpoint.data_path.read_bytes()
+        checkpoint.data_path.write_bytes(data[: len(data) // 2])
+    else:
+        trainer = load_inflight(checkpoint)
+        if change == "start":  # the slot holds a search its run does not ask for
+            trainer.searches[0].theta = trainer.searches[0].theta + 1e-3
+        else:
+            trainer.hp = dataclasses.replace(trainer.hp, threads=2)
+        counts = dict(zip(checkpoint.runs, checkpoint.trials, strict=True))
+        save_inflight(checkpoint.metadata_path, trainer, counts)
     with caplog.at_level("INFO", logger="lonlib.lockstep"):
-        run_experiment(config, tmp_path, progress=False, executor="lockstep", slots=2)
-    assert "stale in-flight checkpoint removed" in caplog.text
-    assert "resumed" not in caplog.text
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    log = caplog.text
+    if change in ("trials", "start"):
+        assert "resumed 1 searches in flight (70 env steps)" in log
+        assert "1 whose runs went on since restart" in log
+    elif change == "threads":
+        assert "trained with device='cpu', threads=2" in log and "resumed" not in log
+    else:
+        assert "stale in-flight checkpoint removed" in log and "resumed" not in log
     want = serial[0][(serial[0]["p"] == 1e-3) & (serial[0]["run"] < 2)].reset_index(drop=True)
     pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert not list((tmp_path / ".inflight").iterdir())
+
+
+def test_the_checkpoint_layout_digest_names_what_a_slot_trainer_holds():
+    from lonlib.ddpg import SlotTrainer
+    from lonlib.inflight import LAYOUT_DIGEST, layout_digest
+    from lonlib.nets import actor_spec, critic_spec
+
+    trainer = SlotTrainer(
+        np.zeros((1, actor_spec(1).n_params)),
+        np.zeros((1, critic_spec(1).n_params)),
+        [0],
+        CONFIG.env,
+        CONFIG.ddpg,
+    )
+    assert layout_digest(trainer) == LAYOUT_DIGEST, (
+        "the attributes of SlotTrainer or its parts changed: checkpoints written before cannot "
+        f"be resumed; set lonlib.inflight.LAYOUT_DIGEST = {layout_digest(trainer)!r}"
+    )
 
 
 def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
@@ -256,8 +310,8 @@ def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
     folder = tmp_path / ".inflight"
     folder.mkdir()
     (folder / "a.json").write_text(
-        '{"write_id": "x", "saved": 0, "runs": [[0.001, 3], [0.0001, 0]], "trials": [2, 0],'
-        ' "steps": [10, 5]}'
+        '{"format": 2, "write_id": "x", "data": "a.x.pt", "saved": 0,'
+        ' "runs": [[0.001, 3], [0.0001, 0]], "trials": [2, 0], "steps": [10, 5]}'
     )
     jobs = [(0.001, run) for run in range(4)] + [(0.0001, run) for run in range(4)]
     groups = split_jobs(tmp_path, jobs, workers=2)
@@ -304,7 +358,7 @@ def test_a_subset_of_a_batch_continues_its_searches_exactly():
     for _ in range(130):
         assert not whole.step()
     assert {id(item[0]) for item in whole.pending} >= {id(s) for s in whole.searches}
-    part = whole.subset([0, 2])
+    part = copy.deepcopy(whole).subset([0, 2])  # nothing shared with the whole
 
     def finish(trainer):
         ended = {}
