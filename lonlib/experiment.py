@@ -161,11 +161,11 @@ def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]
 
 
 def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> None:
-    """Remove the in-flight checkpoints (:mod:`lonlib.inflight`) holding a run that has
-    ended since (it went on without them: they can never be resumed). A checkpoint whose
-    runs another process holds is left to it."""
+    """Remove the in-flight checkpoints (:mod:`lonlib.inflight`) all of whose runs have
+    ended since (they went on without them: nothing in them can be resumed). A checkpoint
+    whose runs another process holds is left to it."""
     for checkpoint in inflight_checkpoints(out):
-        if set(checkpoint.runs) <= set(todo):
+        if not set(checkpoint.runs).isdisjoint(todo):
             continue
         with hold_runs(out, checkpoint.runs) as held:
             if held:

@@ -154,9 +154,9 @@ def run_lockstep(
         """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
         continue made active (the others go back to the front of ``pending``)."""
         for checkpoint in inflight_checkpoints(out):
-            if checkpoint_seconds is None or not set(checkpoint.runs) <= set(pending):
+            if checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(pending):
                 continue
-            restored = _restore(checkpoint, lock_and_open, config)
+            restored = _restore(checkpoint, lock_and_open, config, set(pending))
             if restored is None:
                 continue
             trainer, kept, dropped = restored
@@ -164,8 +164,9 @@ def run_lockstep(
                 pending.remove((run.p, run.run))
                 active[run.p, run.run] = run
             for job in reversed(dropped):  # they restart from their stored trials, first
-                pending.remove(job)
-                pending.appendleft(job)
+                if job in pending:  # (not if it has ended)
+                    pending.remove(job)
+                    pending.appendleft(job)
             log.info(
                 "%s: resumed %d searches in flight (%s env steps) from %s%s",
                 out,
@@ -264,18 +265,24 @@ def run_lockstep(
 
 
 def _restore(
-    checkpoint: InflightCheckpoint, lock_and_open: Callable[[Job, bool], _Run], config: Any
+    checkpoint: InflightCheckpoint,
+    lock_and_open: Callable[[Job, bool], _Run],
+    config: Any,
+    jobs: set[Job],
 ) -> tuple[SlotTrainer, list[_Run], list[Job]] | None:
     """Lock and open the runs of ``checkpoint`` and load its batch: the trainer, the runs of
     the slots that continue (locked) and those of the slots dropped because their runs went
-    on since the write (unlocked). ``None`` (every lock released) if a run is held by
-    another process, or the file cannot be read now or was trained with other settings
-    (kept), or if no slot continues or it cannot be unpickled here (removed: stale)."""
+    on since the write (unlocked). Each of its runs must be one of ``jobs`` or have ended.
+    ``None`` (every lock released) if a run is held by another process or is someone else's
+    job, or the file cannot be read now or was trained with other settings (kept), or if no
+    slot continues or it cannot be unpickled here (removed: stale)."""
     runs: list[_Run] = []
     stale = None
     try:
         for job in checkpoint.runs:
             runs.append(lock_and_open(job, False))
+            if job not in jobs and not runs[-1].driver.finished:
+                return None
         remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
         trainer = load_inflight(checkpoint, config.ddpg.device)
         if trainer.hp != config.ddpg or trainer.env_config != config.env:
@@ -396,7 +403,7 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
 
     wanted = set(jobs)
     while True:
-        stored = [c for c in inflight_checkpoints(out) if set(c.runs) <= wanted]
+        stored = [c for c in inflight_checkpoints(out) if not wanted.isdisjoint(c.runs)]
         if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
             return
         largest = stored[0]
@@ -420,15 +427,16 @@ def split_jobs(
     out: str | Path, jobs: Sequence[Job], workers: int, checkpoints: bool = True
 ) -> list[list[Job]]:
     """``jobs`` dealt to ``workers`` processes: with ``checkpoints``, each of the first gets
-    the runs of one in-flight checkpoint of ``out`` (whose runs are all in ``jobs``) first;
-    then the other jobs go in turn to the process with the fewest."""
+    the runs (those among ``jobs``: the others have ended) of one in-flight checkpoint of
+    ``out`` first; then the other jobs go in turn to the process with the fewest."""
     groups: list[list[Job]] = [[] for _ in range(workers)]
     taken: set[Job] = set()
     wanted = set(jobs)
-    stored = [c for c in inflight_checkpoints(out) if set(c.runs) <= wanted] if checkpoints else []
+    stored = inflight_checkpoints(out) if checkpoints else []
+    stored = [c for c in stored if not wanted.isdisjoint(c.runs)]
     for group, checkpoint in zip(groups, stored, strict=False):
         if taken.isdisjoint(checkpoint.runs):
-            group.extend(checkpoint.runs)
+            group.extend(run for run in checkpoint.runs if run in wanted)
             taken.update(checkpoint.runs)
     for job in jobs:
         if job not in taken:

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from lonlib.ddpg import DDPGConfig
-from lonlib.experiment import ExperimentConfig, run_experiment, status
+from lonlib.experiment import ExperimentConfig, run_experiment, run_one, status
 from lonlib.pendulum import PendulumConfig
 from lonlib.store import read_experiment_trials
 
@@ -239,7 +239,7 @@ def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
 SMALL = dataclasses.replace(CONFIG, perturbations=(1e-3,), runs=2)
 
 
-@pytest.mark.parametrize("change", ["trials", "start", "all", "truncated", "threads"])
+@pytest.mark.parametrize("change", ["trials", "ended", "start", "all", "truncated", "threads"])
 def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
     serial, tmp_path, monkeypatch, caplog, change
 ):
@@ -260,6 +260,8 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
         if change == "trials":
             meta["trials"][1] -= 1
         checkpoint.metadata_path.write_text(json.dumps(meta))
+    elif change == "ended":  # run 1 was taken to its end by another executor
+        run_one(tmp_path, SMALL, 1e-3, 1)
     elif change == "truncated":
         data = checkpoint.data_path.read_bytes()
         checkpoint.data_path.write_bytes(data[: len(data) // 2])
@@ -274,7 +276,7 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
     with caplog.at_level("INFO", logger="lonlib.lockstep"):
         run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
     log = caplog.text
-    if change in ("trials", "start"):
+    if change in ("trials", "start", "ended"):
         assert "resumed 1 searches in flight (70 env steps)" in log
         assert "1 whose runs went on since restart" in log
     elif change == "threads":
