@@ -42,7 +42,7 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
 )
 from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
-from lonlib.inflight import inflight_checkpoints, remove_inflight
+from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints, remove_inflight
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep, run_lockstep_processes
 from lonlib.manifest import manifest_path, updated_manifest
@@ -100,13 +100,15 @@ def run_lock_path(out: Path, p: float, run: int) -> Path:
 
 
 @contextmanager
-def hold_runs(out: Path, runs: Sequence[tuple[float, int]]) -> Iterator[bool]:
-    """Hold the locks of ``runs`` for the ``with`` block, yielding True; yield False
-    (holding none) if another process holds one of them."""
+def hold_runs(
+    out: Path, runs: Sequence[tuple[float, int]], also: Sequence[Path] = ()
+) -> Iterator[bool]:
+    """Hold the locks of ``runs`` (and the lock files ``also``) for the ``with`` block,
+    yielding True; yield False (holding none) if another process holds one of them."""
     with ExitStack() as locks:
         try:
-            for p, run in runs:
-                locks.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=False))
+            for path in [*(run_lock_path(out, p, run) for p, run in runs), *also]:
+                locks.enter_context(exclusive_lock(path, wait=False))
         except LockHeld:
             locks.close()
             yield False
@@ -167,7 +169,7 @@ def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> Non
     for checkpoint in inflight_checkpoints(out):
         if not set(checkpoint.runs).isdisjoint(todo):
             continue
-        with hold_runs(out, checkpoint.runs) as held:
+        with hold_runs(out, checkpoint.runs, [checkpoint_lock_path(checkpoint)]) as held:
             if held:
                 log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.name)
                 remove_inflight(checkpoint.metadata_path)

@@ -85,6 +85,13 @@ def inflight_folder(out: str | Path) -> Path:
     return Path(out) / INFLIGHT_FOLDER
 
 
+def checkpoint_lock_path(checkpoint: InflightCheckpoint | Path) -> Path:
+    """The lock file the batch writing a checkpoint holds while it trains (a checkpoint or
+    its metadata path)."""
+    path = checkpoint.metadata_path if isinstance(checkpoint, InflightCheckpoint) else checkpoint
+    return path.with_suffix(".lock")
+
+
 def new_checkpoint_path(out: str | Path) -> Path:
     """The metadata path of a new batch's checkpoint."""
     return inflight_folder(out) / f"{uuid.uuid4().hex[:12]}.json"
@@ -199,16 +206,25 @@ def remove_inflight(metadata_path: Path) -> None:
     with contextlib.suppress(FileNotFoundError):
         metadata_path.unlink()
     remove_leftovers(metadata_path)
+    with contextlib.suppress(FileNotFoundError):
+        checkpoint_lock_path(metadata_path).unlink()
 
 
 def split_inflight(checkpoint: InflightCheckpoint, parts: int, device: str = "cpu") -> None:
     """Replace ``checkpoint`` by ``parts`` checkpoints of about equal numbers of its runs
     (for as many processes; each part continues its searches exactly as the whole would).
-    Raises as :func:`load_inflight`."""
+    Raises as :func:`load_inflight`, or :class:`lonlib.store.DataWriteError` (then no part
+    is left)."""
     trainer = load_inflight(checkpoint, device)
     trials = dict(zip(checkpoint.runs, checkpoint.trials, strict=True))
     busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
-    for index in range(min(parts, len(busy))):
-        part = trainer.subset(busy[index::parts])
-        save_inflight(new_checkpoint_path(checkpoint.metadata_path.parent.parent), part, trials)
+    written: list[Path] = []
+    try:
+        for index in range(min(parts, len(busy))):
+            written.append(new_checkpoint_path(checkpoint.metadata_path.parent.parent))
+            save_inflight(written[-1], trainer.subset(busy[index::parts]), trials)
+    except BaseException:
+        for path in written:  # the whole stays the one checkpoint of its runs
+            remove_inflight(path)
+        raise
     remove_inflight(checkpoint.metadata_path)

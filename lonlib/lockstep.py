@@ -38,6 +38,7 @@ from lonlib.ddpg import DDPGConfig, SlotTrainer, check_batch_size
 from lonlib.inflight import (
     CheckpointUnreadable,
     InflightCheckpoint,
+    checkpoint_lock_path,
     inflight_checkpoints,
     load_inflight,
     new_checkpoint_path,
@@ -112,6 +113,7 @@ def run_lockstep(
     active: dict[Job, _Run] = {}
 
     deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
+    owner = ExitStack()  # the lock of the batch's checkpoint, held while the batch trains
 
     def lock_and_open(job: Job, block: bool) -> _Run:
         """Run ``job`` locked, its driver resumed from storage (raises LockHeld)."""
@@ -156,9 +158,16 @@ def run_lockstep(
         for checkpoint in inflight_checkpoints(out):
             if checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(pending):
                 continue
+            ours = ExitStack()  # a live batch holds its checkpoint's lock
+            try:
+                ours.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint), wait=False))
+            except LockHeld:
+                continue
             restored = _restore(checkpoint, lock_and_open, config, set(pending))
             if restored is None:
+                ours.close()
                 continue
+            owner.enter_context(ours)
             trainer, kept, dropped = restored
             for run in kept:
                 pending.remove((run.p, run.run))
@@ -189,6 +198,10 @@ def run_lockstep(
 
     def batch(block_first: bool) -> None:
         """Train until the pending runs are done (those held by others are deferred)."""
+        with owner:
+            train(block_first)
+
+    def train(block_first: bool) -> None:
         restored = restore()
         if restored is not None:
             trainer, checkpoint = restored
@@ -239,7 +252,9 @@ def run_lockstep(
             now = time.monotonic()
             due = checkpoint_seconds is not None and now - checkpoint_written >= checkpoint_seconds
             if due and trainer.busy.any():
-                checkpoint = checkpoint or new_checkpoint_path(out)
+                if checkpoint is None:
+                    checkpoint = new_checkpoint_path(out)
+                    owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
                 counts = {tag: len(run.driver.state.trials) for tag, run in active.items()}
                 try:
                     save_inflight(checkpoint, trainer, counts)
@@ -284,7 +299,11 @@ def _restore(
             if job not in jobs and not runs[-1].driver.finished:
                 return None
         remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
-        trainer = load_inflight(checkpoint, config.ddpg.device)
+        try:
+            trainer = load_inflight(checkpoint, config.ddpg.device)
+        except ValueError as error:  # truncated, or written by another version
+            stale = str(error)
+            return None
         if trainer.hp != config.ddpg or trainer.env_config != config.env:
             log.warning(
                 "%s: in-flight checkpoint trained with device=%r, threads=%d: resume with those "
@@ -305,14 +324,13 @@ def _restore(
         pass
     except CheckpointUnreadable as error:
         log.warning("%s: in-flight checkpoint skipped (%s)", checkpoint.metadata_path, error)
-    except ValueError as error:  # truncated, or written by another version
-        stale = str(error)
     finally:
         for run in runs:
             run.lock.close()
-    if stale is not None:
-        log.warning("%s: stale in-flight checkpoint removed (%s)", checkpoint.metadata_path, stale)
-        remove_inflight(checkpoint.metadata_path)
+        if stale is not None:
+            path = checkpoint.metadata_path
+            log.warning("%s: stale in-flight checkpoint removed (%s)", path, stale)
+            remove_inflight(path)
     return None
 
 
@@ -407,14 +425,14 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
         if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
             return
         largest = stored[0]
-        with hold_runs(out, largest.runs) as held:
+        with hold_runs(out, largest.runs, [checkpoint_lock_path(largest)]) as held:
             if not held:
                 return
             try:
                 split_inflight(
                     largest, min(workers - len(stored) + 1, len(largest.runs)), config.ddpg.device
                 )
-            except CheckpointUnreadable as error:
+            except (CheckpointUnreadable, DataWriteError) as error:
                 log.warning("%s: not split (%s)", largest.metadata_path, error)
                 return
             except ValueError as error:

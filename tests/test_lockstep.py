@@ -376,3 +376,23 @@ def test_a_subset_of_a_batch_continues_its_searches_exactly():
         np.testing.assert_array_equal(result.theta, want[tag].theta)
         strip = [{**vars(r), "seconds": 0} for r in result.history]
         assert strip == [{**vars(r), "seconds": 0} for r in want[tag].history]
+
+
+def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
+    from lonlib.experiment import remove_finished_checkpoints
+    from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints
+    from lonlib.lock import exclusive_lock
+
+    folder = tmp_path / ".inflight"
+    folder.mkdir()
+    (folder / "a.json").write_text(
+        '{"format": 2, "write_id": "x", "data": "a.x.pt", "saved": 0,'
+        ' "runs": [[0.001, 0]], "trials": [3], "steps": [10]}'
+    )
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    with exclusive_lock(checkpoint_lock_path(checkpoint)):  # its batch trains on
+        remove_finished_checkpoints(tmp_path, todo=[])
+        assert inflight_checkpoints(tmp_path) == [checkpoint]
+    remove_finished_checkpoints(tmp_path, todo=[(0.001, 1)])  # its run has ended
+    assert not inflight_checkpoints(tmp_path)
+    assert not list(folder.iterdir())
