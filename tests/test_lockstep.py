@@ -306,15 +306,22 @@ def test_the_checkpoint_layout_digest_names_what_a_slot_trainer_holds():
     )
 
 
+def fake_checkpoint(out, runs, trials):
+    """Metadata of a checkpoint (no data file): enough for dealing runs and removing it."""
+    import json
+
+    folder = out / ".inflight"
+    folder.mkdir(exist_ok=True)
+    meta = {"format": 2, "write_id": "x", "data": "a.x.pt", "saved": 0, "runs": runs}
+    meta |= {"trials": trials, "steps": [10] * len(runs)}
+    (folder / "a.json").write_text(json.dumps(meta))
+    return folder
+
+
 def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
     from lonlib.lockstep import split_jobs
 
-    folder = tmp_path / ".inflight"
-    folder.mkdir()
-    (folder / "a.json").write_text(
-        '{"format": 2, "write_id": "x", "data": "a.x.pt", "saved": 0,'
-        ' "runs": [[0.001, 3], [0.0001, 0]], "trials": [2, 0], "steps": [10, 5]}'
-    )
+    fake_checkpoint(tmp_path, runs=[[0.001, 3], [0.0001, 0]], trials=[2, 0])
     jobs = [(0.001, run) for run in range(4)] + [(0.0001, run) for run in range(4)]
     groups = split_jobs(tmp_path, jobs, workers=2)
     assert groups[0][:2] == [(0.001, 3), (0.0001, 0)]
@@ -383,12 +390,7 @@ def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
     from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints
     from lonlib.lock import exclusive_lock
 
-    folder = tmp_path / ".inflight"
-    folder.mkdir()
-    (folder / "a.json").write_text(
-        '{"format": 2, "write_id": "x", "data": "a.x.pt", "saved": 0,'
-        ' "runs": [[0.001, 0]], "trials": [3], "steps": [10]}'
-    )
+    folder = fake_checkpoint(tmp_path, runs=[[0.001, 0]], trials=[3])
     (checkpoint,) = inflight_checkpoints(tmp_path)
     with exclusive_lock(checkpoint_lock_path(checkpoint)):  # its batch trains on
         remove_finished_checkpoints(tmp_path, todo=[])
