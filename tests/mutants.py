@@ -42,7 +42,7 @@ GUARDS = {
     REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     STREAMS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py"],
-    LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
+    LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py", "tests/test_lockstep.py"],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
     SIM: ["tests/test_pendulum.py"],
