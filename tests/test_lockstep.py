@@ -164,12 +164,7 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
     from lonlib.inflight import inflight_checkpoints
 
     # Killed in one process, resumed in two: its checkpoint is split, one part per process.
-    kill_after_checkpoints(monkeypatch, writes=100)
-    with pytest.raises(KeyboardInterrupt):
-        run_experiment(
-            CONFIG, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
-        )
-    monkeypatch.undo()
+    killed_after_checkpoints(monkeypatch, tmp_path, CONFIG, slots=4, writes=100)
     capfd.readouterr()
     run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=3, workers=2)
     assert capfd.readouterr().err.count("resumed 2 searches in flight (200 env steps)") == 2
@@ -179,8 +174,9 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
     assert digest.keys() == serial[1].keys()
 
 
-def kill_after_checkpoints(monkeypatch, writes):
-    """Make the lockstep executor die right after its ``writes``-th in-flight checkpoint."""
+def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
+    """Run ``config`` into ``folder`` through one lockstep batch of ``slots`` that writes an
+    in-flight checkpoint every step and dies right after its ``writes``-th."""
     import lonlib.lockstep
 
     save = lonlib.lockstep.save_inflight
@@ -193,6 +189,11 @@ def kill_after_checkpoints(monkeypatch, writes):
             raise KeyboardInterrupt
 
     monkeypatch.setattr(lonlib.lockstep, "save_inflight", save_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(
+            config, folder, progress=False, executor="lockstep", slots=slots, checkpoint_seconds=0
+        )
+    monkeypatch.undo()
 
 
 def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
@@ -247,12 +248,7 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
 
     from lonlib.inflight import inflight_checkpoints, load_inflight, save_inflight
 
-    kill_after_checkpoints(monkeypatch, writes=70)
-    with pytest.raises(KeyboardInterrupt):
-        run_experiment(
-            SMALL, tmp_path, progress=False, executor="lockstep", slots=2, checkpoint_seconds=0
-        )
-    monkeypatch.undo()
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     if change in ("trials", "all"):  # as if runs had stored a trial after the write
         meta = json.loads(checkpoint.metadata_path.read_text())
@@ -335,12 +331,7 @@ def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
 ):
     from lonlib.inflight import inflight_checkpoints, split_inflight
 
-    kill_after_checkpoints(monkeypatch, writes=120)
-    with pytest.raises(KeyboardInterrupt):
-        run_experiment(
-            CONFIG, tmp_path, progress=False, executor="lockstep", slots=8, checkpoint_seconds=0
-        )
-    monkeypatch.undo()
+    killed_after_checkpoints(monkeypatch, tmp_path, CONFIG, slots=8, writes=120)
     (whole,) = inflight_checkpoints(tmp_path)
     split_inflight(whole, parts=3)
     parts = inflight_checkpoints(tmp_path)
