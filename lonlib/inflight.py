@@ -70,11 +70,6 @@ class InflightCheckpoint:
     saved: float  # time.time() of the write
 
     @property
-    def env_steps(self) -> int:
-        """Env steps trained by the searches in flight, all together."""
-        return sum(self.steps)
-
-    @property
     def name(self) -> str:
         """The batch's id (its metadata file's stem)."""
         return self.metadata_path.stem
