@@ -40,6 +40,7 @@ from lonlib.store import (
     read_manifest,
     read_optimum,
 )
+from lonlib.summary import experiment_summary
 
 
 def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
@@ -60,6 +61,7 @@ class Analysis:
     behavioural_metrics: pd.DataFrame = field(default_factory=pd.DataFrame)
     claims: pd.DataFrame = field(default_factory=pd.DataFrame)  # the paper's claims, verdicts
     claim_peaks: pd.DataFrame = field(default_factory=pd.DataFrame)  # peaks at the claims' p
+    summary: pd.DataFrame = field(default_factory=pd.DataFrame)  # how far, what found, per p
     files: list[Path] = field(default_factory=list)
     figures: dict[str, plt.Figure] = field(default_factory=dict)
     interactive: dict[str, Any] = field(default_factory=dict)
@@ -73,7 +75,8 @@ def analyse(
     close_figures: bool = False,
 ) -> Analysis:
     """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, the
-    paper's claims tested (``claims.csv``, ``claims.md``: :mod:`lonlib.claims`), and a
+    paper's claims tested (``claims.csv``, ``claims.md``: :mod:`lonlib.claims`), the
+    experiment's summary per p (``summary.csv``: :mod:`lonlib.summary`), and a
     sensitivity view when more than two p values are present. Reads the stored runs and
     writes only under ``<folder>/figures/``.
 
@@ -131,7 +134,8 @@ def analyse(
             peak_rows.append(table.assign(p=p, histogram=what))
     result.metrics = pd.DataFrame(metric_rows)
     result.peaks = pd.concat(peak_rows, ignore_index=True)
-    tables = [("metrics", result.metrics), ("peaks", result.peaks)]
+    result.summary = experiment_summary(folder)
+    tables = [("summary", result.summary), ("metrics", result.metrics), ("peaks", result.peaks)]
     if labelled:
         result.behaviours = behaviour_table(trials, tolerance)
         result.behavioural_metrics = pd.DataFrame(behavioural_rows)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.readme_tables import splice
+from lonlib.readme_tables import splice_generated
 from lonlib.store import p_label
 
 CLAIM_COLUMNS = {"claim": "claim", "paper": "the paper says", "evidence": "evidence"}
@@ -77,5 +77,4 @@ def splice_readme(readme: str, markdown: str, source: str) -> str:
     """``readme`` with the text between :data:`README_BEGIN` and :data:`README_END`
     replaced by ``markdown`` and a line naming the experiment folder ``source`` it came
     from, so the README's claims table is generated, never typed."""
-    body = f"*Generated from `{source}` by `lonlib analyse`.*\n\n{markdown.strip()}"
-    return splice(readme, README_BEGIN, README_END, body)
+    return splice_generated(readme, README_BEGIN, README_END, markdown, source)

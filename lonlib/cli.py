@@ -79,23 +79,28 @@ def _lon(args: argparse.Namespace) -> None:
 def _analyse(args: argparse.Namespace) -> None:
     from lonlib.analysis import analyse
     from lonlib.claims_report import claims_markdown, splice_readme
+    from lonlib.summary import splice_summary, summary_markdown
 
     readme = Path(args.readme) if args.readme else None
     if readme is not None:  # refuse a README without the markers before any work
         if not readme.is_file():
             raise ValueError(f"--readme {readme}: no such file")
-        splice_readme(readme.read_text(), "", args.dir)
+        splice_summary(splice_readme(readme.read_text(), "", args.dir), "", args.dir)
     result = analyse(
         args.dir, seed=args.seed, tolerance=args.tolerance, bins=args.bins, close_figures=True
     )
     verdicts = result.claims[["claim", "verdict", "evidence"]]
     with pd.option_context("display.width", 200, "display.max_colwidth", 120):
+        print(result.summary.drop(columns="behaviours").to_string(index=False))
         print(verdicts.to_string(index=False))
     print(f"{len(result.files)} figures and tables written to {Path(args.dir) / 'figures'}")
     if readme is not None:
-        table = claims_markdown(result.claims, result.claim_peaks)
-        readme.write_text(splice_readme(readme.read_text(), table, args.dir), encoding="utf-8")
-        print(f"claims table pasted into {readme}")
+        text = splice_readme(
+            readme.read_text(), claims_markdown(result.claims, result.claim_peaks), args.dir
+        )
+        text = splice_summary(text, summary_markdown(result.summary), args.dir)
+        readme.write_text(text, encoding="utf-8")
+        print(f"summary and claims tables pasted into {readme}")
 
 
 def _calibrate(args: argparse.Namespace) -> None:
@@ -175,7 +180,8 @@ def build_parser() -> argparse.ArgumentParser:
     analysis.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality")
     analysis.add_argument("--bins", type=int, default=50, help="histogram bins on [0, 1]")
     analysis.add_argument(
-        "--readme", help="also paste the claims table between the claims markers of this file"
+        "--readme",
+        help="also paste the summary and claims tables between their markers in this file",
     )
     analysis.set_defaults(func=_analyse)
 

@@ -54,9 +54,12 @@ from lonlib.store import (
     load_run_state,
     read_experiment_trials,
     read_manifest,
+    read_trials,
     remove_temporary_files,
+    replay_trials,
     run_dir,
     save_step,
+    trials_path,
     write_json,
 )
 from lonlib.validation import check_range
@@ -329,14 +332,15 @@ def status(out: str | Path) -> pd.DataFrame:
         finished = started = searches = 0
         best = float("nan")
         for run in range(config.runs):
-            state = load_run_state(out, p, run, bh)
-            if state is None:
+            path = trials_path(out, p, run)
+            if not path.exists():
                 continue
+            state = replay_trials(read_trials(path), bh)  # the optima's files are not needed
             searches += len(state.trials)
             finished += state.finished
             started += not state.finished
-            if state.incumbent is not None:
-                best = np.fmax(best, state.incumbent.fitness)
+            if state.incumbent_index >= 0:
+                best = np.fmax(best, state.trials[state.incumbent_index].fitness)
         rows.append(
             {
                 "p": p,

@@ -12,3 +12,10 @@ def splice(text: str, begin: str, end: str, body: str) -> str:
     head, rest = text.split(begin)
     _, tail = rest.split(end)
     return f"{head}{begin}\n{body.strip()}\n{end}{tail}"
+
+
+def splice_generated(text: str, begin: str, end: str, markdown: str, source: str) -> str:
+    """:func:`splice` of ``markdown`` headed by a line naming the experiment folder
+    ``source`` that ``lonlib analyse`` generated it from."""
+    body = f"*Generated from `{source}` by `lonlib analyse`.*\n\n{markdown.strip()}"
+    return splice(text, begin, end, body)

@@ -285,17 +285,24 @@ def read_optimum(path: Path) -> LocalOptimum:
         raise CorruptDataError(f"{path}: cannot read the stored optimum ({error})") from error
 
 
+def replay_trials(table: pd.DataFrame, config: BasinHoppingConfig) -> RunState:
+    """The :class:`RunState` of one run's stored trials (a ``trials.parquet`` table) by
+    Algorithm 2's bookkeeping, without the incumbent's parameters (``incumbent`` None)."""
+    state = RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
+    for row in table.to_dict("records"):
+        behaviour = {k: v for k, v in row.items() if k.startswith("b_") or k == "label"}
+        trial = Trial(**{name: row[name] for name in TRIAL_FIELDS}, behaviour=behaviour)
+        state.record(trial, None, config)
+    return state
+
+
 def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -> RunState | None:
     """Rebuild a run's :class:`RunState` from disk (None if it has not started) by
     replaying its stored trials through Algorithm 2's bookkeeping."""
     path = trials_path(root, p, run)
     if not path.exists():
         return None
-    state = RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
-    for row in read_trials(path).to_dict("records"):
-        behaviour = {k: v for k, v in row.items() if k.startswith("b_") or k == "label"}
-        trial = Trial(**{name: row[name] for name in TRIAL_FIELDS}, behaviour=behaviour)
-        state.record(trial, None, config)
+    state = replay_trials(read_trials(path), config)
     if state.incumbent_index >= 0:
         state.incumbent = read_optimum(optimum_path(root, p, run, state.incumbent_index))
     return state

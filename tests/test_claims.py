@@ -26,6 +26,9 @@ from lonlib.claims_report import README_BEGIN, README_END, claims_markdown, mark
 from lonlib.effect_size import bootstrap_delta_ci, cliffs_delta, compare_greater
 from lonlib.experiment import ExperimentConfig
 from lonlib.store import read_experiment_trials, save_step, write_json
+from lonlib.summary import README_BEGIN as SUMMARY_BEGIN
+from lonlib.summary import README_END as SUMMARY_END
+from lonlib.summary import experiment_summary, summary_markdown
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -239,7 +242,10 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
     folder = write_experiment(tmp_path / "exp", {1e-3: WORSE[:6], 1e-4: PAPER_LIKE[::3]})
     before = hashes(folder)
     readme = tmp_path / "README.md"
-    readme.write_text(f"intro\n{README_BEGIN}\nold table\n{README_END}\noutro\n")
+    readme.write_text(
+        f"intro\n{SUMMARY_BEGIN}\nold summary\n{SUMMARY_END}\n"
+        f"{README_BEGIN}\nold table\n{README_END}\noutro\n"
+    )
     main(["analyse", str(folder), "--readme", str(readme)])
     after = hashes(folder)
     assert {k: v for k, v in after.items() if not k.startswith("figures/")} == before
@@ -252,8 +258,11 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
     expected = claims_markdown(claims_from_trials(trials), peaks_beside_paper(trials))
     assert (figures / "claims.md").read_text() == expected
     pasted = readme.read_text()
-    assert pasted.startswith(f"intro\n{README_BEGIN}\n*Generated from `{folder}`")
-    assert expected.strip() in pasted and "old table" not in pasted
+    summary = summary_markdown(experiment_summary(folder))
+    assert summary_markdown(pd.read_csv(figures / "summary.csv")) == summary
+    assert pasted.startswith(f"intro\n{SUMMARY_BEGIN}\n*Generated from `{folder}`")
+    assert f"{summary.strip()}\n{SUMMARY_END}\n{README_BEGIN}\n*Generated from" in pasted
+    assert "old table" not in pasted and "old summary" not in pasted
     assert pasted.endswith(f"{expected.strip()}\n{README_END}\noutro\n")
     assert "written to" in capsys.readouterr().out
 
@@ -284,6 +293,11 @@ def test_the_analysis_only_command_refuses_a_folder_without_an_experiment(tmp_pa
             ]
         )
     assert "must hold" in capsys.readouterr().err
+    claims_only = tmp_path / "CLAIMS.md"
+    claims_only.write_text(f"{README_BEGIN}\n{README_END}\n")
+    with pytest.raises(SystemExit):
+        main(["analyse", str(tmp_path / "x"), "--readme", str(claims_only)])
+    assert SUMMARY_BEGIN in capsys.readouterr().err
     assert not (tmp_path / "x" / "figures").exists()  # refused before any work
 
 

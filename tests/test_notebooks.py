@@ -92,6 +92,12 @@ def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_pa
         if "text/markdown" in out.get("data", {})
     ]
     assert len(tables) == 1 and tables[0].startswith("| claim | the paper says |")  # claims
+    frames = [
+        "".join(out["data"]["text/html"])
+        for out in outputs(executed)
+        if "text/html" in out.get("data", {})
+    ]
+    assert any("runs_above_zero" in frame for frame in frames)  # the summary per p
     for name in (
         "fig2_optima_boxplot.png",
         "fig3_lon_p=0.0001.png",

@@ -1,0 +1,97 @@
+"""The experiment summary (lonlib.summary) on a synthetic folder written with lonlib.store:
+every count is the stored trials', finished runs follow Algorithm 2's tolerance, and the
+README block is generated between its own markers."""
+
+import os
+from pathlib import Path
+from unittest import mock
+
+import pandas as pd
+import pytest
+
+from lonlib.basin_hopping import Trial
+from lonlib.experiment import ExperimentConfig, status
+from lonlib.store import save_step, write_json
+from lonlib.summary import (
+    README_BEGIN,
+    README_END,
+    behaviour_counts,
+    experiment_summary,
+    splice_summary,
+    summary_markdown,
+)
+
+# (fitness, accepted, improved on its start, label) per trial; tolerance 2 ends a run after
+# two rejections in a row.
+RUNS = {
+    1e-3: [
+        [(0.0, True, False, "crash"), (0.2, True, True, "spin"), (0.1, False, True, "crash"),
+         (0.15, False, True, "crash")],  # finished: two rejections
+        [(0.05, True, True, "spin"), (0.5, True, True, "spin"), (0.3, False, False, "stop")],
+    ],
+    1e-4: [
+        [(0.0, True, False, "crash"), (0.0, True, False, "crash"), (0.0, True, False, "crash")],
+        [(0.1, True, True, "spin")],
+        [(0.7, True, True, "spin")],  # run bests 0, 0.1, 0.7: the median is not the mean
+    ],
+}  # fmt: skip
+
+
+@pytest.fixture()
+def experiment(tmp_path: Path) -> Path:
+    config = ExperimentConfig(name="synthetic", perturbations=(1e-3, 1e-4), runs=3, tolerance=2)
+    folder = tmp_path / "exp"
+    folder.mkdir()
+    write_json(folder / "manifest.json", {"experiment": "synthetic", "config": config.to_dict()})
+    with mock.patch.object(os, "fsync"):
+        for p, runs in RUNS.items():
+            for run, chain in enumerate(runs):
+                trials, incumbent = [], -1
+                for index, (fitness, accepted, improved, label) in enumerate(chain):
+                    trials.append(
+                        Trial(index, incumbent, fitness, accepted, 1.0, 1000 * (index + 1),
+                              improved=improved, behaviour={"label": label})
+                    )  # fmt: skip
+                    incumbent = index if accepted else incumbent
+                save_step(folder, p, run, trials, None)
+    return folder
+
+
+def test_the_summary_counts_what_is_stored_per_p(experiment):
+    summary = experiment_summary(experiment).set_index("p")
+    coarse, fine = summary.loc[1e-3], summary.loc[1e-4]
+    assert (coarse["runs"], coarse["finished"], coarse["started"]) == (3, 1, 1)
+    assert (fine["runs"], fine["finished"], fine["started"]) == (3, 0, 3)
+    assert coarse["local_searches"] == 7 and fine["local_searches"] == 5
+    assert coarse["accepted"] == 4 and fine["accepted"] == 5
+    assert coarse["improved"] == 5 and fine["improved"] == 2
+    assert coarse["above_zero"] == 6 and fine["above_zero"] == 2
+    assert coarse["runs_above_zero"] == 2 and fine["runs_above_zero"] == 2
+    assert coarse["best_fitness"] == 0.5 and coarse["median_run_best"] == pytest.approx(0.35)
+    assert fine["best_fitness"] == 0.7 and fine["median_run_best"] == pytest.approx(0.1)
+    assert coarse["env_steps"] == 1000 * (1 + 2 + 3 + 4) + 1000 * (1 + 2 + 3)
+    assert coarse["behaviours"] == "crash 3, spin 3, stop 1"
+    assert fine["behaviours"] == "crash 3, spin 2" and fine["in_flight"] == 0
+
+
+def test_status_needs_no_optimum_files(experiment):
+    table = status(experiment).set_index("p")  # save_step above wrote no optimum
+    assert table.loc[1e-3, "best_fitness"] == 0.5 and table.loc[1e-4, "best_fitness"] == 0.7
+
+
+def test_behaviour_counts_put_the_most_frequent_first():
+    labels = pd.Series(["b", "a", "c", "c", None, "b", "c"])
+    assert behaviour_counts(labels) == "c 3, b 2, a 1"
+    assert behaviour_counts(pd.Series([None, None])) == ""
+
+
+def test_the_readme_block_is_generated_between_its_markers(experiment):
+    table = summary_markdown(experiment_summary(experiment))
+    assert (
+        "| 0.001 | 1 / 3 | 7 (4, 5, 6) | 2 | 0.5 | 0.35 | 0.0 | crash 3, spin 3, stop 1 |" in table
+    )
+    readme = f"intro\n{README_BEGIN}\nold\n{README_END}\noutro\n"
+    pasted = splice_summary(readme, table, "data/exp")
+    assert "old" not in pasted and table.strip() in pasted
+    assert pasted.startswith(f"intro\n{README_BEGIN}\n*Generated from `data/exp`")
+    assert pasted.endswith(f"{table.strip()}\n{README_END}\noutro\n")
