@@ -443,11 +443,14 @@ def peaks_beside_paper(
     trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e-9
 ) -> pd.DataFrame:
     """At the examined p, each of the paper's peaks beside the nearest peak detected in the
-    sink histogram (Fig. 4) and in the optima histogram (Fig. 5), with their distance."""
+    sink histogram (Fig. 4) and in the optima histogram (Fig. 5), with their distance and
+    the histogram's number of values (``values``: with few, every peak is one optimum)."""
     by_p = landscapes(trials, tolerance)
     land = by_p[examined_p(list(by_p))]
     tables = [
-        compare_with_paper(detect_peaks(values, bins=bins)).assign(p=land.p, histogram=what)
+        compare_with_paper(detect_peaks(values, bins=bins)).assign(
+            p=land.p, histogram=what, values=len(values)
+        )
         for what, values in (("sinks", land.sink_fitness), ("optima", land.optima_fitness))
     ]
     return pd.concat(tables, ignore_index=True)

@@ -54,9 +54,11 @@ def claims_markdown(claims: pd.DataFrame, peaks: pd.DataFrame | None = None) -> 
                 side[f"nearest {histogram} peak"] = wide[("nearest_detected", histogram)].to_numpy()
                 side[f"distance ({histogram})"] = wide[("distance", histogram)].to_numpy()
         p = float(peaks["p"].iloc[0])
+        counts = peaks.groupby("histogram")["values"].first() if "values" in peaks else {}
+        sinks, optima = (f", {counts[h]} {h}" if h in counts else "" for h in ("sinks", "optima"))
         parts += [
             f"Peaks at p = {p_label(p)}: the paper's beside the nearest detected in the "
-            "sink histogram (Fig. 4) and the optima histogram (Fig. 5).",
+            f"sink histogram (Fig. 4{sinks}) and the optima histogram (Fig. 5{optima}).",
             markdown_table(side),
         ]
     return "\n\n".join(parts) + "\n"

@@ -208,6 +208,7 @@ def test_markdown_rendering(paper_like):
     assert [r.split(" | ")[0] for r in rows] == ["| a", "| b", "| c", "| d", "| e"]
     assert all(r.endswith("| **reproduced** |") for r in rows)
     assert "| c | “the smaller perturbation (1e-4)" in text and "| 1e-4 vs 1e-3 |" in text
+    assert "sink histogram (Fig. 4, 30 sinks) and the optima histogram (Fig. 5, " in text
     peaks = lines[
         lines.index(
             "| paper peak | nearest sinks peak | distance (sinks) "
