@@ -192,9 +192,7 @@ def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e
                 or data["fitness"] > graph.nodes[by_label[behaviour]]["fitness"]
             ):
                 by_label[behaviour] = node
-        chosen += [
-            (node, "best-" + b.replace(" ", "-").strip("()")) for b, node in by_label.items()
-        ]
+        chosen += [(node, f"best-{slug(b)}") for b, node in by_label.items()]
         sink_nodes = sinks(graph)
         values = np.array([graph.nodes[n]["fitness"] for n in sink_nodes])
         for peak in detect_peaks(values, bins=bins)["fitness"]:

@@ -101,3 +101,4 @@ def test_figures_colour_and_stack_by_behaviour_label():
     chosen = optima_to_record(table)
     assert set(chosen["behaviour"]) == set(accepted["label"])  # the best of every label
     assert {"best", "best-spinning", "best-swinging-high"} <= set(chosen["role"])
+    assert "best-spinning-in-phase" in set(chosen["role"])  # file-name safe, no parentheses
