@@ -46,9 +46,12 @@ def _run(args: argparse.Namespace) -> None:
 
 
 def _status(args: argparse.Namespace) -> None:
-    from lonlib.experiment import status
+    from lonlib.experiment import run_status, status
 
     print(status(args.dir).to_string(index=False))
+    if args.runs:
+        with pd.option_context("display.width", 250, "display.max_colwidth", 160):
+            print(run_status(args.dir).to_string(index=False))
 
 
 def _lon(args: argparse.Namespace) -> None:
@@ -162,6 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     stat = sub.add_parser("status", help="what is finished, started and left")
     stat.add_argument("dir")
+    stat.add_argument(
+        "--runs", action="store_true", help="also one line per run: its state and fitness chain"
+    )
     stat.set_defaults(func=_status)
 
     lon = sub.add_parser("lon", help="print LON metrics per p and write exports")

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from lonlib.ddpg import DDPGConfig
-from lonlib.experiment import ExperimentConfig, run_experiment, run_one, status
+from lonlib.experiment import ExperimentConfig, run_experiment, run_one, run_status, status
 from lonlib.pendulum import PendulumConfig
 from lonlib.store import read_experiment_trials
 
@@ -223,6 +223,8 @@ def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
     table = status(tmp_path).set_index("p")
     assert table["saved_in_flight"].sum() == 4
     assert table["saved_env_steps"].sum() == 4 * 149
+    runs = run_status(tmp_path)
+    assert runs["in_flight"].sum() == 4 and set(runs["in_flight_steps"]) <= {0, 149}
     assert read_experiment_trials(tmp_path).empty  # nothing stored: all was in flight
     with caplog.at_level("INFO", logger="lonlib.lockstep"):
         run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=4)

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from lonlib.basin_hopping import Trial
-from lonlib.experiment import ExperimentConfig, status
+from lonlib.experiment import ExperimentConfig, run_status, status
 from lonlib.store import save_step, write_json
 from lonlib.summary import (
     README_BEGIN,
@@ -77,6 +77,22 @@ def test_the_summary_counts_what_is_stored_per_p(experiment):
 def test_status_needs_no_optimum_files(experiment):
     table = status(experiment).set_index("p")  # save_step above wrote no optimum
     assert table.loc[1e-3, "best_fitness"] == 0.5 and table.loc[1e-4, "best_fitness"] == 0.7
+
+
+def test_run_status_has_a_line_per_planned_run_with_its_chain(experiment, capsys):
+    from lonlib.cli import main
+
+    runs = run_status(experiment).set_index(["p", "run"])
+    assert len(runs) == 6  # 2 p x 3 planned runs
+    first, second, unstarted = runs.loc[(1e-3, 0)], runs.loc[(1e-3, 1)], runs.loc[(1e-3, 2)]
+    assert (first["state"], first["end_reason"], first["failures"]) == ("finished", "tolerance", 2)
+    assert first["fitness"] == "0.000 0.200 0.100x 0.150x" and first["best_fitness"] == 0.2
+    assert (second["state"], second["failures"], second["accepted"]) == ("started", 1, 2)
+    assert second["best_fitness"] == 0.5  # the incumbent, not the last trial
+    assert unstarted["state"] == "not started" and unstarted["local_searches"] == 0
+    assert not runs["in_flight"].any()
+    main(["status", str(experiment), "--runs"])
+    assert "0.050 0.500 0.300x" in capsys.readouterr().out
 
 
 def test_behaviour_counts_put_the_most_frequent_first():
