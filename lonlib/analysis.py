@@ -134,7 +134,7 @@ def analyse(
             peak_rows.append(table.assign(p=p, histogram=what))
     result.metrics = pd.DataFrame(metric_rows)
     result.peaks = pd.concat(peak_rows, ignore_index=True)
-    result.summary = experiment_summary(folder)
+    result.summary = experiment_summary(folder, trials)
     tables = [("summary", result.summary), ("metrics", result.metrics), ("peaks", result.peaks)]
     if labelled:
         result.behaviours = behaviour_table(trials, tolerance)

@@ -55,7 +55,11 @@ def claims_markdown(claims: pd.DataFrame, peaks: pd.DataFrame | None = None) -> 
                 side[f"distance ({histogram})"] = wide[("distance", histogram)].to_numpy()
         p = float(peaks["p"].iloc[0])
         counts = peaks.groupby("histogram")["values"].first() if "values" in peaks else {}
-        sinks, optima = (f", {counts[h]} {h}" if h in counts else "" for h in ("sinks", "optima"))
+        singular = {"sinks": "sink", "optima": "optimum"}
+        sinks, optima = (
+            f", {counts[h]} {h if counts[h] != 1 else singular[h]}" if h in counts else ""
+            for h in ("sinks", "optima")
+        )
         parts += [
             f"Peaks at p = {p_label(p)}: the paper's beside the nearest detected in the "
             f"sink histogram (Fig. 4{sinks}) and the optima histogram (Fig. 5{optima}).",

@@ -320,15 +320,15 @@ def run_status(out: str | Path) -> pd.DataFrame:
     ended; local searches stored and accepted; ``failures``, the rejections in a row that
     count towards the tolerance T; the best fitness; ``in_flight`` (a search of the run is
     saved in a lockstep checkpoint, :mod:`lonlib.inflight`) and its ``in_flight_steps``
-    (env steps); and ``fitness``, the
-    chain of stored fitness values with ``x`` after each rejected one. Reads the trials and
-    the manifest only (no optimum file)."""
+    (env steps; the most any checkpoint holds); and ``fitness``, the chain of stored fitness
+    values with ``x`` after each rejected one. Reads the trials and the manifest only: an
+    optimum file that is missing or damaged shows when the run resumes, not here."""
     out = Path(out)
     config = ExperimentConfig.from_mapping(read_manifest(out)["config"])
     saved: dict[tuple[float, int], int] = {}
     for checkpoint in inflight_checkpoints(out):
         for key, steps in zip(checkpoint.runs, checkpoint.steps, strict=True):
-            saved[key] = saved.get(key, 0) + steps
+            saved[key] = max(saved.get(key, 0), steps)
     rows = []
     for p in config.perturbations:
         bh = config.basin_hopping(p)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.claims_report import markdown_table
-from lonlib.experiment import status
+from lonlib.experiment import run_status
 from lonlib.readme_tables import splice_generated
 from lonlib.store import p_label, read_finished_trials
 
@@ -25,35 +25,39 @@ def behaviour_counts(labels: pd.Series) -> str:
     return ", ".join(f"{label} {count}" for label, count in ordered)
 
 
-def experiment_summary(folder: str | Path) -> pd.DataFrame:
-    """One row per planned p of the experiment in ``folder``: runs planned, finished and
-    started (:func:`lonlib.experiment.status`); local searches stored, accepted, and those
-    whose optimum is fitter than its perturbed start (``improved``) or above fitness 0
-    (``above_zero``); runs whose best optimum is above 0; the best fitness and the median
-    of each run's best; the env steps trained; searches in flight saved in checkpoints; and
-    the behaviour labels of the stored optima, most frequent first."""
+def experiment_summary(folder: str | Path, trials: pd.DataFrame | None = None) -> pd.DataFrame:
+    """One row per planned p of the experiment in ``folder``, over its planned runs only
+    (:func:`lonlib.experiment.run_status`): runs planned, finished and started; local
+    searches stored, accepted, and those whose optimum is fitter than its perturbed start
+    (``improved``) or above fitness 0 (``above_zero``); runs whose best (their incumbent,
+    as ``status`` has it) is above 0; the best fitness and the median of the runs' best;
+    the env steps trained; searches in flight saved in checkpoints (``in_flight``) and
+    their env steps; the behaviour labels of the stored optima, most frequent first.
+    ``trials``: the stored trials when the caller has read them already (``analyse``), so
+    that the summary counts the same trials as its figures."""
     folder = Path(folder)
-    trials = read_finished_trials(folder)
+    trials = read_finished_trials(folder) if trials is None else trials
+    runs = run_status(folder)
     rows = []
-    for _, state in status(folder).iterrows():
-        p = float(state["p"])
-        group = trials[trials["p"] == p]
-        run_best = group.groupby("run")["fitness"].max()
+    for p, planned in runs.groupby("p", sort=False):
+        group = trials[(trials["p"] == p) & trials["run"].isin(planned["run"])]
+        best = planned["best_fitness"].dropna()
         rows.append(
             {
                 "p": p,
-                "runs": int(state["runs"]),
-                "finished": int(state["finished"]),
-                "started": int(state["started"]),
+                "runs": len(planned),
+                "finished": int((planned["state"] == "finished").sum()),
+                "started": int((planned["state"] == "started").sum()),
                 "local_searches": len(group),
                 "accepted": int(group["accepted"].sum()),
-                "improved": int(group["improved"].sum()) if "improved" in group else 0,
+                "improved": int(group["improved"].sum()),
                 "above_zero": int((group["fitness"] > 0).sum()),
-                "runs_above_zero": int((run_best > 0).sum()),
-                "best_fitness": float(run_best.max()) if len(run_best) else float("nan"),
-                "median_run_best": float(run_best.median()) if len(run_best) else float("nan"),
+                "runs_above_zero": int((best > 0).sum()),
+                "best_fitness": float(best.max()) if len(best) else float("nan"),
+                "median_run_best": float(best.median()) if len(best) else float("nan"),
                 "env_steps": int(group["env_steps"].sum()),
-                "in_flight": int(state["saved_in_flight"]),
+                "in_flight": int(planned["in_flight"].sum()),
+                "in_flight_steps": int(planned["in_flight_steps"].sum()),
                 "behaviours": behaviour_counts(group["label"]) if "label" in group else "",
             }
         )
@@ -62,26 +66,26 @@ def experiment_summary(folder: str | Path) -> pd.DataFrame:
 
 def summary_markdown(summary: pd.DataFrame) -> str:
     """The summary as a Markdown table, one row per p, env steps in millions."""
+    columns = summary[
+        ["finished", "started", "runs", "local_searches", "accepted", "improved", "above_zero"]
+    ]
     table = pd.DataFrame(
         {
             "p": [p_label(p) for p in summary["p"]],
-            "runs finished / planned": [
-                f"{f} / {r}" for f, r in zip(summary["finished"], summary["runs"], strict=True)
+            "runs finished / started / planned": [
+                f"{f} / {s} / {r}" for f, s, r, *_ in columns.itertuples(False)
             ],
             "local searches (accepted, improved on start, above 0)": [
-                f"{n} ({a}, {i}, {z})"
-                for n, a, i, z in zip(
-                    summary["local_searches"],
-                    summary["accepted"],
-                    summary["improved"],
-                    summary["above_zero"],
-                    strict=True,
-                )
+                f"{n} ({a}, {i}, {z})" for *_, n, a, i, z in columns.itertuples(False)
             ],
             "runs above 0": summary["runs_above_zero"],
             "best fitness": summary["best_fitness"],
             "median of runs' best": summary["median_run_best"],
-            "env steps (M)": [f"{s / 1e6:.1f}" for s in summary["env_steps"]],
+            "env steps (M)": [f"{s / 1e6:.2f}" for s in summary["env_steps"]],
+            "searches in flight (env steps, M)": [
+                f"{n} ({s / 1e6:.2f})"
+                for n, s in zip(summary["in_flight"], summary["in_flight_steps"], strict=True)
+            ],
             "behaviours of the optima": summary["behaviours"],
         }
     )

@@ -11,7 +11,8 @@ import pytest
 
 from lonlib.basin_hopping import Trial
 from lonlib.experiment import ExperimentConfig, run_status, status
-from lonlib.store import save_step, write_json
+from lonlib.inflight import FORMAT
+from lonlib.store import read_experiment_trials, save_step, write_json
 from lonlib.summary import (
     README_BEGIN,
     README_END,
@@ -33,6 +34,7 @@ RUNS = {
         [(0.0, True, False, "crash"), (0.0, True, False, "crash"), (0.0, True, False, "crash")],
         [(0.1, True, True, "spin")],
         [(0.7, True, True, "spin")],  # run bests 0, 0.1, 0.7: the median is not the mean
+        [(0.9, True, True, "balancing")],  # run 3: beyond the 3 runs the manifest plans
     ],
 }  # fmt: skip
 
@@ -49,7 +51,7 @@ def experiment(tmp_path: Path) -> Path:
                 trials, incumbent = [], -1
                 for index, (fitness, accepted, improved, label) in enumerate(chain):
                     trials.append(
-                        Trial(index, incumbent, fitness, accepted, 1.0, 1000 * (index + 1),
+                        Trial(index, incumbent, fitness, accepted, 1.0, 100_000 * (index + 1),
                               improved=improved, behaviour={"label": label})
                     )  # fmt: skip
                     incumbent = index if accepted else incumbent
@@ -69,9 +71,28 @@ def test_the_summary_counts_what_is_stored_per_p(experiment):
     assert coarse["runs_above_zero"] == 2 and fine["runs_above_zero"] == 2
     assert coarse["best_fitness"] == 0.5 and coarse["median_run_best"] == pytest.approx(0.35)
     assert fine["best_fitness"] == 0.7 and fine["median_run_best"] == pytest.approx(0.1)
-    assert coarse["env_steps"] == 1000 * (1 + 2 + 3 + 4) + 1000 * (1 + 2 + 3)
+    assert coarse["env_steps"] == 100_000 * (1 + 2 + 3 + 4) + 100_000 * (1 + 2 + 3)
     assert coarse["behaviours"] == "crash 3, spin 3, stop 1"
     assert fine["behaviours"] == "crash 3, spin 2" and fine["in_flight"] == 0
+
+
+def test_the_summary_counts_searches_in_flight_once_per_run(experiment):
+    folder = experiment / ".inflight"
+    folder.mkdir()
+    checkpoints = {"a": ([[1e-3, 1], [1e-4, 2]], [5000, 7000]), "b": ([[1e-4, 2]], [6000])}
+    for name, (runs, steps) in checkpoints.items():
+        payload = {"format": FORMAT, "write_id": "w", "data": f"{name}.w.pt", "saved": 0.0}
+        payload.update(runs=runs, trials=[1] * len(runs), steps=steps)
+        write_json(folder / f"{name}.json", payload)
+    summary = experiment_summary(experiment).set_index("p")
+    assert summary.loc[1e-3, ["in_flight", "in_flight_steps"]].tolist() == [1, 5000]
+    assert summary.loc[1e-4, ["in_flight", "in_flight_steps"]].tolist() == [1, 7000]
+    assert "| 1 (0.01) |" in summary_markdown(summary.reset_index())
+
+
+def test_the_summary_of_unlabelled_trials_names_no_behaviour(experiment):
+    trials = read_experiment_trials(experiment).drop(columns="label")
+    assert list(experiment_summary(experiment, trials)["behaviours"]) == ["", ""]
 
 
 def test_status_needs_no_optimum_files(experiment):
@@ -103,9 +124,9 @@ def test_behaviour_counts_put_the_most_frequent_first():
 
 def test_the_readme_block_is_generated_between_its_markers(experiment):
     table = summary_markdown(experiment_summary(experiment))
-    assert (
-        "| 0.001 | 1 / 3 | 7 (4, 5, 6) | 2 | 0.5 | 0.35 | 0.0 | crash 3, spin 3, stop 1 |" in table
-    )
+    row = "| 0.001 | 1 / 1 / 3 | 7 (4, 5, 6) | 2 | 0.5 | 0.35 | 1.60 | 0 (0.00) |"
+    row += " crash 3, spin 3, stop 1 |"
+    assert row in table
     readme = f"intro\n{README_BEGIN}\nold\n{README_END}\noutro\n"
     pasted = splice_summary(readme, table, "data/exp")
     assert "old" not in pasted and table.strip() in pasted
