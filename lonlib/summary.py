@@ -72,7 +72,7 @@ def summary_markdown(summary: pd.DataFrame) -> str:
     table = pd.DataFrame(
         {
             "p": [p_label(p) for p in summary["p"]],
-            "runs finished / started / planned": [
+            "runs finished / in progress / planned": [
                 f"{f} / {s} / {r}" for f, s, r, *_ in columns.itertuples(False)
             ],
             "local searches (accepted, improved on start, above 0)": [
