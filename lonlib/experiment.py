@@ -44,7 +44,8 @@ from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
 from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints, remove_inflight
 from lonlib.lock import LockHeld, exclusive_lock
-from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep, run_lockstep_processes
+from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep
+from lonlib.lockstep_workers import run_lockstep_processes
 from lonlib.manifest import manifest_path, updated_manifest
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.progress import progress_bar

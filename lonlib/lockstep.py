@@ -19,10 +19,7 @@ searches in flight from there, losing at most the minutes since.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import logging
-import multiprocessing
-import os
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -45,7 +42,6 @@ from lonlib.inflight import (
     remove_inflight,
     remove_leftovers,
     save_inflight,
-    split_inflight,
 )
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.store import DataWriteError, save_step
@@ -55,6 +51,10 @@ log = logging.getLogger(__name__)
 
 Job = tuple[float, int]
 CHECKPOINT_SECONDS = 600.0  # how often a batch writes its in-flight checkpoint
+
+
+class _Yielded(Exception):
+    """A batch stopped, its checkpoint written, because it was asked to yield."""
 
 
 @dataclass
@@ -88,15 +88,20 @@ def run_lockstep(
     on_tick: Callable[[dict[str, Any]], None] | None = None,
     tick_seconds: float = 5.0,
     checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
-) -> None:
+    should_yield: Callable[[], bool] | None = None,
+) -> bool:
     """Run (or resume) the runs ``jobs`` of experiment ``config`` in ``out`` through one
-    lockstep batch of at most ``slots`` local searches.
+    lockstep batch of at most ``slots`` local searches. True when the batch yielded (below)
+    before its runs ended.
 
     ``on_done(summary)`` is called as each run ends (the summary of
     :func:`lonlib.experiment.run_summary`), and for a run another process holds, at once
     with ``held_by`` naming the holder (unless ``wait``: then its lock is waited for).
     ``on_tick(info)`` runs every ``tick_seconds`` for progress displays, with the searches
-    in flight and the env steps per second of the batch since the last tick.
+    in flight, the runs still pending and the env steps per second of the batch since the
+    last tick. ``should_yield()`` is asked at each tick: when it says so, the batch writes
+    its in-flight checkpoint and stops, to be resumed (split, for example) by a new batch;
+    the runs it has not started stay pending, and nothing is lost.
 
     Every ``checkpoint_seconds`` (``None``: never) the batch is written to an in-flight
     checkpoint (:mod:`lonlib.inflight`), kept in step with the stored trials after that;
@@ -201,6 +206,20 @@ def run_lockstep(
         with owner:
             train(block_first)
 
+    def write_checkpoint(trainer: SlotTrainer, checkpoint: Path | None) -> Path | None:
+        """Write the batch to its in-flight checkpoint (a new one if it has none); the
+        checkpoint's path, or None if it could not be written."""
+        if checkpoint is None:
+            checkpoint = new_checkpoint_path(out)
+            owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
+        counts = {tag: len(run.driver.state.trials) for tag, run in active.items()}
+        try:
+            save_inflight(checkpoint, trainer, counts)
+        except DataWriteError as error:  # a cache: the experiment goes on without it
+            log.warning("in-flight checkpoint not written (%s)", error)
+            return None
+        return checkpoint
+
     def train(block_first: bool) -> None:
         restored = restore()
         if restored is not None:
@@ -228,6 +247,7 @@ def run_lockstep(
             checkpoint, checkpoint_written = None, time.monotonic()
         last_tick, steps_at_tick = time.monotonic(), 0
         steps = 0
+        yielding = should_yield is not None and checkpoint_seconds is not None
         while trainer.busy.any():
             steps += int(trainer.busy.sum())
             refills: list[_Run] = []
@@ -252,19 +272,28 @@ def run_lockstep(
             now = time.monotonic()
             due = checkpoint_seconds is not None and now - checkpoint_written >= checkpoint_seconds
             if due and trainer.busy.any():
-                if checkpoint is None:
-                    checkpoint = new_checkpoint_path(out)
-                    owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
-                counts = {tag: len(run.driver.state.trials) for tag, run in active.items()}
-                try:
-                    save_inflight(checkpoint, trainer, counts)
-                except DataWriteError as error:  # a cache: the experiment goes on without it
-                    log.warning("in-flight checkpoint not written (%s)", error)
+                checkpoint = write_checkpoint(trainer, checkpoint) or checkpoint
                 checkpoint_written = now
-            if on_tick is not None and now - last_tick >= tick_seconds:
+            if now - last_tick < tick_seconds:
+                continue
+            if on_tick is not None:
                 rate = (steps - steps_at_tick) / (now - last_tick)
-                on_tick({"in_flight": int(trainer.busy.sum()), "env_steps/s": f"{rate:,.0f}"})
-                last_tick, steps_at_tick = now, steps
+                in_flight = int(trainer.busy.sum())
+                on_tick(
+                    {"in_flight": in_flight, "pending": len(pending), "env_steps/s": f"{rate:,.0f}"}
+                )
+            last_tick, steps_at_tick = now, steps
+            if yielding and trainer.busy.any() and should_yield():
+                written = write_checkpoint(trainer, checkpoint)
+                if written is not None:
+                    log.info(
+                        "%s: batch of %d searches yielded (checkpoint %s)",
+                        out,
+                        int(trainer.busy.sum()),
+                        written.name,
+                    )
+                    raise _Yielded
+                yielding = False  # without a checkpoint it would lose its searches
         if checkpoint is not None:
             remove_inflight(checkpoint)  # every run of the batch has ended
 
@@ -274,9 +303,12 @@ def run_lockstep(
             pending.extend(deferred)
             deferred.clear()
             batch(block_first=True)
+    except _Yielded:
+        return True
     finally:
         for run in active.values():
             run.lock.close()
+    return False
 
 
 def _restore(
@@ -355,143 +387,3 @@ def _slots_gone_on(
         ):
             gone[job] = slot
     return gone
-
-
-def run_lockstep_processes(
-    out: str | Path,
-    config: Any,
-    jobs: Sequence[Job],
-    on_done: Callable[[dict[str, Any]], None],
-    slots: int,
-    workers: int,
-    wait: bool = False,
-    on_tick: Callable[[dict[str, Any]], None] | None = None,
-    tick_seconds: float = 5.0,
-    checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
-) -> None:
-    """:func:`run_lockstep` in ``workers`` spawned processes, each a batch of up to
-    ``slots`` searches over its share of the jobs (for machines with a few cores and no
-    GPU: one lockstep batch per core). A process first gets the runs of one in-flight
-    checkpoint, if any, so that it resumes that batch; the other jobs are dealt out in turn.
-    A run's trials are the same as in one batch."""
-    check_range("workers", workers, 1, 4096)
-    if checkpoint_seconds is not None:
-        spread_checkpoints(out, config, jobs, workers)
-    groups = split_jobs(out, jobs, workers, checkpoints=checkpoint_seconds is not None)
-    groups = [group for group in groups if group]
-    if len(groups) <= 1:
-        run_lockstep(
-            out, config, jobs, on_done, slots, wait, on_tick, tick_seconds, checkpoint_seconds
-        )
-        return
-    context = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(len(groups), mp_context=context) as pool:
-        futures = [
-            pool.submit(
-                _lockstep_group,
-                str(out),
-                config,
-                group,
-                slots,
-                wait,
-                os.getpid(),
-                checkpoint_seconds,
-            )
-            for group in groups
-        ]
-        pending = set(futures)
-        try:
-            while pending:
-                done, pending = cf.wait(pending, timeout=tick_seconds)
-                for future in done:
-                    for summary in future.result():
-                        on_done(summary)
-                if on_tick is not None:
-                    on_tick({"processes": len(pending)})
-        except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
-
-
-def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], workers: int) -> None:
-    """Split in-flight checkpoints of ``jobs`` until there is one per worker process (or
-    each holds one run), so that every process resumes searches; a checkpoint whose runs
-    another process holds is left alone."""
-    from lonlib.experiment import hold_runs
-
-    wanted = set(jobs)
-    while True:
-        stored = [c for c in inflight_checkpoints(out) if not wanted.isdisjoint(c.runs)]
-        if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
-            return
-        largest = stored[0]
-        with hold_runs(out, largest.runs, [checkpoint_lock_path(largest)]) as held:
-            if not held:
-                return
-            try:
-                split_inflight(
-                    largest, min(workers - len(stored) + 1, len(largest.runs)), config.ddpg.device
-                )
-            except (CheckpointUnreadable, DataWriteError) as error:
-                log.warning("%s: not split (%s)", largest.metadata_path, error)
-                return
-            except ValueError as error:
-                path = largest.metadata_path
-                log.warning("%s: stale in-flight checkpoint removed (%s)", path, error)
-                remove_inflight(path)
-
-
-def split_jobs(
-    out: str | Path, jobs: Sequence[Job], workers: int, checkpoints: bool = True
-) -> list[list[Job]]:
-    """``jobs`` dealt to ``workers`` processes: with ``checkpoints``, each of the first gets
-    the runs (those among ``jobs``: the others have ended) of one in-flight checkpoint of
-    ``out`` first; then the other jobs go in turn to the process with the fewest."""
-    groups: list[list[Job]] = [[] for _ in range(workers)]
-    taken: set[Job] = set()
-    wanted = set(jobs)
-    stored = inflight_checkpoints(out) if checkpoints else []
-    stored = [c for c in stored if not wanted.isdisjoint(c.runs)]
-    for group, checkpoint in zip(groups, stored, strict=False):
-        if taken.isdisjoint(checkpoint.runs):
-            group.extend(run for run in checkpoint.runs if run in wanted)
-            taken.update(checkpoint.runs)
-    for job in jobs:
-        if job not in taken:
-            min(groups, key=len).append(job)
-    return groups
-
-
-def _lockstep_group(
-    out: str,
-    config: Any,
-    jobs: list[Job],
-    slots: int,
-    wait: bool,
-    parent: int,
-    checkpoint_seconds: float | None,
-) -> list[dict[str, Any]]:
-    """One worker process's lockstep batch; the summaries of its runs. It stops (losing
-    only its searches in flight since its last checkpoint) when the process that started
-    it has died."""
-
-    def stop_if_orphaned(_info: dict[str, Any]) -> None:
-        if os.getppid() != parent:  # the pool machinery would swallow an exception
-            print(f"lockstep worker {os.getpid()}: parent {parent} died; exiting", flush=True)
-            os._exit(1)  # the kernel releases the run locks; stored trials are complete
-
-    from lonlib.cli import show_lonlib_messages
-
-    show_lonlib_messages()  # a spawned process: its messages would be lost otherwise
-    summaries: list[dict[str, Any]] = []
-    run_lockstep(
-        out,
-        config,
-        jobs,
-        summaries.append,
-        slots,
-        wait,
-        stop_if_orphaned,
-        checkpoint_seconds=checkpoint_seconds,
-    )
-    return summaries

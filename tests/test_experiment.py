@@ -101,10 +101,18 @@ def test_process_pool_and_dask_give_identical_trials(reference, tmp_path, worker
     pd.testing.assert_frame_equal(other[COMPARED], trials[COMPARED])
 
 
-def test_sigkill_then_resume_gives_the_uninterrupted_trials(tmp_path):
-    yaml_path = write_tiny_yaml(tmp_path, max_steps=300)
+@pytest.fixture(scope="module")
+def longer_searches(tmp_path_factory):
+    """The tiny experiment with 300-step searches, run serially: (YAML path, trials); long
+    enough to be killed part-way."""
+    folder = tmp_path_factory.mktemp("longer")
+    yaml_path = write_tiny_yaml(folder, max_steps=300)
+    return yaml_path, run_experiment(load_config(yaml_path), folder / "serial", progress=False)
+
+
+def test_sigkill_then_resume_gives_the_uninterrupted_trials(longer_searches, tmp_path):
+    yaml_path, expected = longer_searches
     config = load_config(yaml_path)
-    expected = run_experiment(config, tmp_path / "reference", progress=False)
     out = tmp_path / "killed"
     command = [sys.executable, "-m", "lonlib", "run", str(yaml_path), "--out", str(out), "--quiet"]
     process = subprocess.Popen(command, start_new_session=True)
@@ -186,14 +194,13 @@ def test_cli_lon_prints_metrics_and_writes_exports(reference, tmp_path, capsys):
         cli_main(["run", "quick", "--p", "0"])
 
 
-def test_a_killed_pool_worker_is_retried_and_its_run_resumes(tmp_path):
+def test_a_killed_pool_worker_is_retried_and_its_run_resumes(longer_searches, tmp_path):
     import threading
 
     import psutil
 
-    yaml_path = write_tiny_yaml(tmp_path, max_steps=300)
+    yaml_path, expected = longer_searches
     config = load_config(yaml_path)
-    expected = run_experiment(config, tmp_path / "reference", progress=False)
     out = tmp_path / "pool"
     outcome = {}
 

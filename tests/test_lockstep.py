@@ -174,6 +174,33 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
     assert digest.keys() == serial[1].keys()
 
 
+def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_path, caplog, capfd):
+    from lonlib.inflight import inflight_checkpoints
+    from lonlib.lockstep_workers import run_lockstep_processes
+
+    # The second process's one run has ended already, so it is idle at once while the first
+    # holds a search in flight and a run not started: the first stops after writing its
+    # checkpoint, and a second round gives each process one of its two runs.
+    p, q = CONFIG.perturbations
+    run_one(tmp_path, CONFIG, p, 1)
+    jobs = [(p, 0), (p, 1), (q, 0)]
+    summaries = []
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_lockstep_processes(
+            tmp_path, CONFIG, jobs, summaries.append, slots=1, workers=2, tick_seconds=0.01
+        )
+    assert "a process ran out of runs; the 2 searches left are dealt out again" in caplog.text
+    err = capfd.readouterr().err
+    assert err.count("batch of 1 searches yielded") == 1
+    assert err.count("resumed 1 searches in flight") == 1
+    assert "resumed 1 searches in flight (0 env steps)" not in err
+    assert sorted((s["p"], s["run"]) for s in summaries) == sorted(jobs)  # each once
+    assert not inflight_checkpoints(tmp_path)
+    want = serial[0].set_index(["p", "run"]).loc[jobs].reset_index()
+    got = stored(tmp_path)[0].sort_values(["p", "run", "index"], ascending=[False, True, True])
+    pd.testing.assert_frame_equal(got.reset_index(drop=True), want)
+
+
 def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
     """Run ``config`` into ``folder`` through one lockstep batch of ``slots`` that writes an
     in-flight checkpoint every step and dies right after its ``writes``-th."""
@@ -317,7 +344,7 @@ def fake_checkpoint(out, runs, trials):
 
 
 def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
-    from lonlib.lockstep import split_jobs
+    from lonlib.lockstep_workers import split_jobs
 
     fake_checkpoint(tmp_path, runs=[[0.001, 3], [0.0001, 0]], trials=[2, 0])
     jobs = [(0.001, run) for run in range(4)] + [(0.0001, run) for run in range(4)]
