@@ -206,9 +206,10 @@ def run_lockstep(
         with owner:
             train(block_first)
 
-    def write_checkpoint(trainer: SlotTrainer, checkpoint: Path | None) -> Path | None:
-        """Write the batch to its in-flight checkpoint (a new one if it has none); the
-        checkpoint's path, or None if it could not be written."""
+    def write_checkpoint(trainer: SlotTrainer, checkpoint: Path | None) -> tuple[Path, bool]:
+        """Write the batch to its in-flight checkpoint (a new one, locked, if it has none):
+        the checkpoint's path (kept for the next write even if this one failed) and whether
+        it was written."""
         if checkpoint is None:
             checkpoint = new_checkpoint_path(out)
             owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
@@ -217,8 +218,8 @@ def run_lockstep(
             save_inflight(checkpoint, trainer, counts)
         except DataWriteError as error:  # a cache: the experiment goes on without it
             log.warning("in-flight checkpoint not written (%s)", error)
-            return None
-        return checkpoint
+            return checkpoint, False
+        return checkpoint, True
 
     def train(block_first: bool) -> None:
         restored = restore()
@@ -272,27 +273,31 @@ def run_lockstep(
             now = time.monotonic()
             due = checkpoint_seconds is not None and now - checkpoint_written >= checkpoint_seconds
             if due and trainer.busy.any():
-                checkpoint = write_checkpoint(trainer, checkpoint) or checkpoint
+                checkpoint, _ = write_checkpoint(trainer, checkpoint)
                 checkpoint_written = now
             if now - last_tick < tick_seconds:
                 continue
             if on_tick is not None:
                 rate = (steps - steps_at_tick) / (now - last_tick)
-                in_flight = int(trainer.busy.sum())
                 on_tick(
-                    {"in_flight": in_flight, "pending": len(pending), "env_steps/s": f"{rate:,.0f}"}
+                    {
+                        "in_flight": int(trainer.busy.sum()),
+                        "pending": len(pending),
+                        "env_steps/s": f"{rate:,.0f}",
+                    }
                 )
             last_tick, steps_at_tick = now, steps
             if yielding and trainer.busy.any() and should_yield():
-                written = write_checkpoint(trainer, checkpoint)
-                if written is not None:
+                checkpoint, written = write_checkpoint(trainer, checkpoint)
+                if written:
                     log.info(
                         "%s: batch of %d searches yielded (checkpoint %s)",
                         out,
                         int(trainer.busy.sum()),
-                        written.name,
+                        checkpoint.name,
                     )
                     raise _Yielded
+                log.warning("%s: could not yield; its searches continue in this batch", out)
                 yielding = False  # without a checkpoint it would lose its searches
         if checkpoint is not None:
             remove_inflight(checkpoint)  # every run of the batch has ended

@@ -3,12 +3,14 @@
 For machines with a few cores and no GPU: one lockstep batch
 (:func:`lonlib.lockstep.run_lockstep`) per process, each over its share of the runs. The
 shares are fixed while every process has work. When one process's runs have all ended while
-the others still hold more searches (in flight or not started) than there are busy
-processes, every process writes its in-flight checkpoint and stops at its next tick, and a
-new round deals out what is left again: the checkpoints are split so that each process
-resumes searches, and the runs not started go to the process with the fewest. A checkpoint
-carries each search exactly, so a run's trials are the same as in one batch (tested); the
-rounds only change how soon the experiment ends.
+the others still hold more work (searches in flight and runs not started) than there are
+busy processes, every busy process writes its in-flight checkpoint and stops at its next
+tick, and a new round deals out what is left again: the checkpoints are split so that each
+process resumes searches, and the runs not started go to the process with the fewest. A
+checkpoint carries each search exactly, so a run's trials are the same as in one batch
+(tested); the rounds only change how soon the experiment ends. A process that cannot write
+its checkpoint keeps its searches (and the round waits for it); runs held by another process
+and waited for (``wait``) are never dealt out again.
 """
 
 from __future__ import annotations
@@ -85,8 +87,18 @@ def run_lockstep_processes(
                 checkpoint_seconds,
             )
             return
-        args = (slots, wait, on_tick, tick_seconds, checkpoint_seconds)
-        if not _round(out, config, groups, report, *args):
+        dealt_again = _round(
+            out,
+            config,
+            groups,
+            report,
+            slots=slots,
+            wait=wait,
+            on_tick=on_tick,
+            tick_seconds=tick_seconds,
+            checkpoint_seconds=checkpoint_seconds,
+        )
+        if not dealt_again:
             return
         remaining = [job for job in remaining if job not in reported]
 
@@ -103,11 +115,14 @@ def _round(
     checkpoint_seconds: float | None,
 ) -> bool:
     """One process per group until every process has ended; True when they were asked to
-    yield (their work is then left in checkpoints and pending runs for the next round)."""
+    yield (their work is then left in checkpoints and pending runs for the next round).
+    Never with ``wait``: a process waiting for a run another process holds cannot yield
+    while it waits. If this process fails (or is interrupted), the workers are asked to
+    yield too, so that they write their checkpoints and stop within a tick."""
     context = multiprocessing.get_context("spawn")
     signal = context.Event()
-    loads = context.RawArray("q", [len(group) for group in groups])
-    idle = False  # a process has ended with all its runs done
+    loads = context.RawArray("q", len(groups))  # 0 until a process has said otherwise
+    rebalance = checkpoint_seconds is not None and not wait
     with cf.ProcessPoolExecutor(
         len(groups), mp_context=context, initializer=_share, initargs=(signal, loads)
     ) as pool:
@@ -131,20 +146,15 @@ def _round(
             while busy:
                 done, busy = cf.wait(busy, timeout=tick_seconds)
                 for future in done:
-                    summaries, yielded = future.result()
-                    loads[futures[future]] = 0
-                    idle = idle or not yielded
+                    summaries, _ = future.result()  # the runs it ended (a yielded one has more)
                     for summary in summaries:
                         on_done(summary)
                 left = sum(loads[futures[future]] for future in busy)
-                if (
-                    checkpoint_seconds is not None
-                    and idle
-                    and not signal.is_set()
-                    and left > len(busy)
-                ):
+                idle = len(busy) < len(futures)
+                if rebalance and idle and not signal.is_set() and left > len(busy):
                     log.info(
-                        "%s: a process ran out of runs; the %d searches left are dealt out again",
+                        "%s: a process ran out of runs; %d searches in flight or runs not "
+                        "started are dealt out again",
                         out,
                         left,
                     )
@@ -152,6 +162,7 @@ def _round(
                 if on_tick is not None:
                     on_tick({"processes": len(busy)})
         except BaseException:
+            signal.set()
             pool.shutdown(wait=True, cancel_futures=True)
             raise
     return signal.is_set()

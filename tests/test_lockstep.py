@@ -179,26 +179,64 @@ def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_pat
     from lonlib.lockstep_workers import run_lockstep_processes
 
     # The second process's one run has ended already, so it is idle at once while the first
-    # holds a search in flight and a run not started: the first stops after writing its
-    # checkpoint, and a second round gives each process one of its two runs.
+    # trains a batch of two searches: the first stops after writing its checkpoint, which a
+    # second round splits, one search per process.
     p, q = CONFIG.perturbations
     run_one(tmp_path, CONFIG, p, 1)
     jobs = [(p, 0), (p, 1), (q, 0)]
     summaries = []
     with caplog.at_level("INFO", logger="lonlib"):
         run_lockstep_processes(
-            tmp_path, CONFIG, jobs, summaries.append, slots=1, workers=2, tick_seconds=0.01
+            tmp_path, CONFIG, jobs, summaries.append, slots=2, workers=2, tick_seconds=0.01
         )
-    assert "a process ran out of runs; the 2 searches left are dealt out again" in caplog.text
+    assert "a process ran out of runs; 2 searches in flight or runs not started" in caplog.text
     err = capfd.readouterr().err
-    assert err.count("batch of 1 searches yielded") == 1
-    assert err.count("resumed 1 searches in flight") == 1
+    assert err.count("batch of 2 searches yielded") == 1
+    assert err.count("resumed 1 searches in flight") == 2
     assert "resumed 1 searches in flight (0 env steps)" not in err
     assert sorted((s["p"], s["run"]) for s in summaries) == sorted(jobs)  # each once
     assert not inflight_checkpoints(tmp_path)
+    trials, digest = stored(tmp_path)
     want = serial[0].set_index(["p", "run"]).loc[jobs].reset_index()
-    got = stored(tmp_path)[0].sort_values(["p", "run", "index"], ascending=[False, True, True])
-    pd.testing.assert_frame_equal(got.reset_index(drop=True), want)
+    trials = trials.sort_values(["p", "run", "index"], ascending=[False, True, True])
+    pd.testing.assert_frame_equal(trials.reset_index(drop=True), want)
+    for key, value in digest.items():
+        if isinstance(value, pd.DataFrame):
+            pd.testing.assert_frame_equal(value, serial[1][key], check_exact=True)
+        else:
+            assert value == serial[1][key], key
+
+
+def test_a_batch_that_cannot_write_its_checkpoint_keeps_its_searches(
+    serial, tmp_path, monkeypatch, caplog
+):
+    import lonlib.lockstep
+    from lonlib.lockstep import run_lockstep
+    from lonlib.store import DataWriteError
+
+    def disk_full(*_args, **_kwargs):
+        raise DataWriteError("no space left on device (test)")
+
+    monkeypatch.setattr(lonlib.lockstep, "save_inflight", disk_full)
+    asked = []
+    jobs = [(p, run) for p in CONFIG.perturbations for run in range(CONFIG.runs)]
+    summaries = []
+    with caplog.at_level("INFO", logger="lonlib"):
+        yielded = run_lockstep(
+            tmp_path,
+            CONFIG,
+            jobs,
+            summaries.append,
+            slots=4,
+            tick_seconds=0,
+            checkpoint_seconds=0,  # every step tries (and fails) to write one
+            should_yield=lambda: asked.append(True) or True,
+        )
+    assert not yielded and len(asked) == 1  # asked once: it said it could not, and went on
+    assert "could not yield; its searches continue in this batch" in caplog.text
+    assert sorted((s["p"], s["run"]) for s in summaries) == sorted(jobs)
+    assert not list((tmp_path / ".inflight").iterdir())  # one checkpoint path, lock removed
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], serial[0])
 
 
 def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
