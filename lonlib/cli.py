@@ -107,12 +107,8 @@ def _analyse(args: argparse.Namespace) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> None:
-    from lonlib.calibration import (
-        load_calibration,
-        readme_markers,
-        run_calibration,
-        with_overrides,
-    )
+    from lonlib.calibration import load_calibration, run_calibration, with_overrides
+    from lonlib.calibration_report import readme_markers
     from lonlib.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)

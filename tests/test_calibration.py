@@ -21,6 +21,7 @@ from lonlib.calibration import (
     named_calibration,
     run_calibration,
 )
+from lonlib.calibration_report import search_table
 from lonlib.cli import main as cli_main
 from lonlib.nets import actor_spec
 from lonlib.pendulum import PendulumConfig
@@ -290,7 +291,7 @@ def test_a_warm_up_longer_than_an_episode_still_gives_a_best_fitness(tmp_path):
     )
     record, _ = calibration.run_cell(config.cells[0], config)
     assert any(np.isnan(s["history_greedy_fitness"][0]) for s in record["searches"])
-    table = calibration.search_table([record])
+    table = search_table([record])
     assert table["best_fitness"].notna().all()
     assert (table["best_fitness"] > 0).any()
 
