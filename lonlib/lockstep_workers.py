@@ -146,8 +146,7 @@ def _round(
             while busy:
                 done, busy = cf.wait(busy, timeout=tick_seconds)
                 for future in done:
-                    summaries, _ = future.result()  # the runs it ended (a yielded one has more)
-                    for summary in summaries:
+                    for summary in future.result():  # the runs it ended
                         on_done(summary)
                 left = sum(loads[futures[future]] for future in busy)
                 idle = len(busy) < len(futures)
@@ -233,9 +232,9 @@ def _lockstep_group(
     checkpoint_seconds: float | None,
     tick_seconds: float,
     index: int,
-) -> tuple[list[dict[str, Any]], bool]:
-    """One worker process's lockstep batch: the summaries of its runs that ended, and
-    whether it yielded. It stops (losing only its searches in flight since its last
+) -> list[dict[str, Any]]:
+    """One worker process's lockstep batch: the summaries of its runs that ended (whether
+    it yielded is the round's signal). It stops (losing only its searches in flight since its last
     checkpoint) when the process that started it has died."""
 
     def on_tick(info: dict[str, Any]) -> None:
@@ -248,7 +247,7 @@ def _lockstep_group(
 
     show_lonlib_messages()  # a spawned process: its messages would be lost otherwise
     summaries: list[dict[str, Any]] = []
-    yielded = run_lockstep(
+    run_lockstep(
         out,
         config,
         jobs,
@@ -260,4 +259,4 @@ def _lockstep_group(
         checkpoint_seconds,
         should_yield=_yield_signal.is_set,
     )
-    return summaries, yielded
+    return summaries
