@@ -8,13 +8,10 @@ hopping as the global search, and the LON analysis built on what they sample.
 import gymnasium as _gym
 
 from lonlib.env import ENV_ID
-from lonlib.pendulum import (
-    CoupledPendulums,
-    EndReason,
-    Evaluation,
-    PendulumConfig,
-    evaluate,
-)
+from lonlib.pendulum import CoupledPendulums, EndReason, PendulumConfig
+from lonlib.rollout import Rollout, evaluate
+
+Evaluation = Rollout  # the name ``evaluate`` returned before the one rollout
 
 __version__ = "0.1.0"
 

@@ -226,6 +226,18 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
         role = row.role if behaviour in row.role else f"{row.role}_{behaviour}".strip("_")
         name = recording_name(row.p, int(row.run), row.fitness, label=role)
         path = folder / "recordings" / name
-        record(optimum.theta, config.env, path, title=f"{row.role} p={p_label(row.p)}")
+        record(
+            optimum.theta,
+            config.env,
+            path,
+            title=f"{row.role} p={p_label(row.p)}",
+            scoring=config.ddpg.scoring,
+            properties={
+                "p": float(row.p),
+                "run": int(row.run),
+                "index": int(row.index),
+                "stored_fitness": float(row.fitness),
+            },
+        )
         paths.append(path)
     return paths

@@ -262,9 +262,7 @@ def local_optimum(result, env_config, hp, describe_optima: bool = True) -> Local
     (with its behaviour descriptor when ``describe_optima``)."""
     from lonlib.behaviour import describe_columns
 
-    behaviour = (
-        describe_columns(result.theta, env_config, hp.eval_seed) if describe_optima else None
-    )
+    behaviour = describe_columns(result.theta, env_config, hp.scoring) if describe_optima else None
     return LocalOptimum(
         fitness=result.fitness,
         theta=result.theta,

@@ -22,13 +22,15 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from lonlib.nets import actor_spec, forward_numpy
-from lonlib.pendulum import (
-    CoupledPendulums,
-    EndReason,
-    PendulumConfig,
-    Policy,
-    wrap_angle,
+from lonlib import portable_math
+from lonlib.pendulum import PendulumConfig, Policy
+from lonlib.rollout import (
+    Rollout,
+    Scoring,
+    actor_policy,
+    nominal_offsets,
+    perturbed_offsets,
+    run_policy,
 )
 from lonlib.validation import check_field_types, check_range
 
@@ -47,13 +49,16 @@ LABELS = (
 """Every label :func:`label` can return, from the most to the least accomplished."""
 
 PREFIX = "b_"  # column prefix of descriptor fields in a trials table
+ADDED_LATER = ("fitness_all", "fitness_mean", "robust_std")  # NaN when read from older tables
 
 
 @dataclass(frozen=True)
 class BehaviourDescriptor:
     """Measurements of one greedy rollout. Per-rod fields are tuples (one value per rod)."""
 
-    fitness: float  # Algorithm 1 fitness of the rollout (equals the optimum's)
+    fitness: float  # Algorithm 1 fitness of the nominal episode, config's fitness_mode
+    fitness_all: float  # the same episode with "all rods upright" per step
+    fitness_mean: float  # the same episode with the upright share per step
     upright_share: tuple[float, ...]  # share of executed steps with the rod upright
     turns: tuple[float, ...]  # signed full turns of the rod over the episode
     upright_speed: tuple[float, ...]  # mean |phi_dot| while upright [rad/s] (0 if never)
@@ -63,8 +68,9 @@ class BehaviourDescriptor:
     end_reason: str  # EndReason name
     end_step: int  # steps executed
     nominal_steps: int  # the episode's step limit
-    robust_mean: float  # fitness from perturbed starts: mean
-    robust_min: float  # and worst
+    robust_mean: float  # fitness from the M perturbed starts: mean
+    robust_min: float  # worst
+    robust_std: float  # and standard deviation (population, over the M starts)
 
     def to_columns(self) -> dict[str, float | int | str]:
         """Flat ``b_*`` columns for a trials table (per-rod fields as ``b_<name>_<rod>``)."""
@@ -88,6 +94,8 @@ class BehaviourDescriptor:
                     if key.startswith(f"{PREFIX}{f.name}_") and key.rsplit("_", 1)[1].isdigit()
                 )
                 values[f.name] = tuple(float(value) for _, value in rods)
+            elif f.name in ADDED_LATER:  # absent from tables stored before they existed
+                values[f.name] = row.get(f"{PREFIX}{f.name}", float("nan"))
             else:
                 values[f.name] = row[f"{PREFIX}{f.name}"]
         values["end_step"] = int(values["end_step"])
@@ -132,34 +140,56 @@ class BehaviourThresholds:
 def describe(
     theta_or_policy: np.ndarray | Policy,
     config: PendulumConfig,
-    eval_seed: int = 0,
-    robustness_starts: int = 8,
-    robustness_noise: float = 0.01,
-    robustness_seed: int = 0,
+    scoring: Scoring = Scoring(),
 ) -> BehaviourDescriptor:
     """Descriptor of a greedy Actor (flat parameters) or any policy on ``config``.
 
-    The nominal rollout starts as the fitness evaluation does (``eval_seed``); robustness
-    rollouts add U[-noise, noise] to every start coordinate (x, x_dot, phi, phi_dot) of
-    every cart, drawn from ``robustness_seed``, and run as one batch.
+    One batched call of the one rollout (:func:`lonlib.rollout.run_policy`): row 0 is the
+    nominal episode, the one Algorithm 1 scores (so ``fitness`` is the optimum's stored
+    fitness, bit for bit), traced step by step; rows 1..M start from the scoring's
+    perturbed starts (the conditioning: ``robust_*``).
     """
-    check_range("robustness_starts", robustness_starts, 1, 10_000)
-    check_range("robustness_noise", robustness_noise, 0.0, 0.5)
     policy = as_policy(theta_or_policy, config)
+    m = scoring.starts
+    offsets = np.concatenate(
+        [
+            nominal_offsets(config, scoring.eval_seed),
+            perturbed_offsets(config, m, scoring.noise, scoring.seed, scoring.eval_seed),
+        ],
+        axis=1,
+    )
+    result = run_policy(policy, config, offsets, trace=True)
+    return describe_rollout(result, config, 0, result.fitness[1:])
+
+
+def describe_actors(
+    thetas: np.ndarray, config: PendulumConfig, scoring: Scoring = Scoring()
+) -> list[BehaviourDescriptor]:
+    """:func:`describe` of ``k`` flat Actors ``[k, P]`` as one batched rollout of
+    ``k (1 + M)`` episodes (rows ``0..k-1`` nominal, then each Actor's ``M`` perturbed
+    starts); descriptor ``b`` equals ``describe(thetas[b])`` bit for bit."""
+    thetas = np.atleast_2d(np.asarray(thetas))
+    k, m = thetas.shape[0], scoring.starts
+    nominal = nominal_offsets(config, scoring.eval_seed)
+    perturbed = perturbed_offsets(config, m, scoring.noise, scoring.seed, scoring.eval_seed)
+    offsets = np.concatenate([np.repeat(nominal, k, axis=1), np.tile(perturbed, (1, k, 1))], axis=1)
+    batch = np.concatenate([thetas, np.repeat(thetas, m, axis=0)])
+    result = run_policy(actor_policy(batch, config), config, offsets, trace=True)
+    robust = result.fitness[k:].reshape(k, m)
+    return [describe_rollout(result, config, b, robust[b]) for b in range(k)]
+
+
+def describe_rollout(
+    result: Rollout, config: PendulumConfig, row: int, robust: np.ndarray
+) -> BehaviourDescriptor:
+    """The descriptor of row ``row`` of a traced rollout, with the fitness from its
+    perturbed starts ``robust [M]`` (summed left to right: defined bits)."""
+    end = int(result.end_step[row])
+    trace = result.trace.row(row, end)
     n = config.n_carts
-    sim = CoupledPendulums(config, 1, eval_seed)
-    start = np.stack([sim.x, sim.x_dot, sim.phi, sim.phi_dot])  # nominal start, [4, 1, n]
-    phis, phi_dots, xs, x_dots = [], [], [], []
-    while not sim.done[0]:
-        sim.step(policy(sim.observe()))
-        phis.append(sim.phi[0].copy())
-        phi_dots.append(sim.phi_dot[0].copy())
-        xs.append(sim.x[0].copy())
-        x_dots.append(sim.x_dot[0].copy())
-    phi, phi_dot = np.array(phis), np.array(phi_dots)  # [T, n]
-    x, x_dot = np.array(xs), np.array(x_dots)
-    upright = np.abs(wrap_angle(phi)) < config.upright_angle
-    start_phi = np.full(n, config.initial_angle)
+    phi, phi_dot, x, x_dot = trace.phi, trace.phi_dot, trace.x, trace.x_dot
+    upright = trace.upright
+    start_phi = np.mod(np.full(n, config.initial_angle), 2 * np.pi)
     unwrapped = np.unwrap(np.vstack([start_phi, phi]), axis=0)
     turns = (unwrapped[-1] - unwrapped[0]) / (2 * np.pi)
     speed_up = np.where(
@@ -167,31 +197,35 @@ def describe(
         (np.abs(phi_dot) * upright).sum(axis=0) / np.maximum(upright.sum(axis=0), 1),
         0.0,
     )
-    phase = float(np.mean(np.cos(phi[:, :-1] - phi[:, 1:]))) if n > 1 else float("nan")
-
-    robust = _robustness(
-        policy, config, start, robustness_starts, robustness_noise, robustness_seed
-    )
+    phase = float(np.mean(portable_math.cos(phi[:, :-1] - phi[:, 1:]))) if n > 1 else float("nan")
+    robust = np.asarray(robust, dtype=np.float64)
+    robust_mean = float(np.add.accumulate(robust)[-1] / robust.size)
+    robust_var = np.add.accumulate((robust - robust_mean) ** 2)[-1] / robust.size
     return BehaviourDescriptor(
-        fitness=float(sim.fitness[0]),
+        fitness=float(result.fitness[row]),
+        fitness_all=float(result.fitness_all[row]),
+        fitness_mean=float(result.fitness_mean[row]),
         upright_share=tuple(float(v) for v in upright.mean(axis=0)),
         turns=tuple(float(v) for v in turns),
         upright_speed=tuple(float(v) for v in speed_up),
         phase=phase,
         cart_range=float(np.mean(x.max(axis=0) - x.min(axis=0))),
         cart_speed=float(np.mean(np.abs(x_dot))),
-        end_reason=EndReason(int(sim.end_reason[0])).name,
-        end_step=int(sim.step_count[0]),
+        end_reason=result.end_reason_name(row),
+        end_step=end,
         nominal_steps=config.steps,
-        robust_mean=float(robust.mean()),
+        robust_mean=robust_mean,
         robust_min=float(robust.min()),
+        robust_std=float(np.sqrt(robust_var)),
     )
 
 
-def describe_columns(theta: np.ndarray, config: PendulumConfig, eval_seed: int = 0) -> dict:
-    """:func:`describe` with the default robustness settings as flat trials-table columns
-    (``b_*``) plus the default ``label``: what experiments store with every trial."""
-    descriptor = describe(theta, config, eval_seed)
+def describe_columns(
+    theta: np.ndarray, config: PendulumConfig, scoring: Scoring = Scoring()
+) -> dict:
+    """:func:`describe` as flat trials-table columns (``b_*``) plus the default ``label``:
+    what experiments store with every trial."""
+    descriptor = describe(theta, config, scoring)
     return {**descriptor.to_columns(), "label": label(descriptor)}
 
 
@@ -216,41 +250,10 @@ def as_policy(theta_or_policy: np.ndarray | Policy, config: PendulumConfig) -> P
     """A flat Actor vector becomes its greedy policy; a callable is returned as it is."""
     if callable(theta_or_policy):
         return theta_or_policy
-    spec = actor_spec(config.n_carts)
-    theta = np.asarray(theta_or_policy, dtype=np.float32)
-    if theta.shape != (spec.n_params,):
-        raise ValueError(f"theta must have shape ({spec.n_params},), got {theta.shape}")
-    if not np.isfinite(theta).all():
-        raise ValueError("theta contains NaN or infinite parameters")
-    return lambda obs: forward_numpy(spec, theta, obs)
-
-
-def _robustness(
-    policy: Policy,
-    config: PendulumConfig,
-    start: np.ndarray,
-    starts: int,
-    noise: float,
-    seed: int,
-) -> np.ndarray:
-    """Fitness of ``policy`` from ``starts`` copies of the nominal ``start`` state
-    (``[4, 1, n]``: x, x_dot, phi, phi_dot) each perturbed by U[-noise, noise], one batch."""
-    n = config.n_carts
-    sim = CoupledPendulums(config, starts)
-    draws = np.random.default_rng(seed).uniform(-noise, noise, size=(4, starts, n))
-    # reset() adds its noise to the noise-free start (not to the constructor's noisy one)
-    base = np.stack(
-        [
-            np.broadcast_to(config.initial_positions(), (starts, n)),
-            np.zeros((starts, n)),
-            np.full((starts, n), config.initial_angle),
-            np.zeros((starts, n)),
-        ]
-    )
-    sim.reset(noise=start - base + draws)
-    while not sim.done.all():
-        sim.step(policy(sim.observe()))
-    return sim.fitness.copy()
+    theta = np.asarray(theta_or_policy)
+    if theta.ndim != 1:
+        raise ValueError(f"theta must be one flat Actor vector, got shape {theta.shape}")
+    return actor_policy(theta, config)
 
 
 def label(descriptor: BehaviourDescriptor, thresholds: BehaviourThresholds | None = None) -> str:

@@ -13,13 +13,15 @@ replays the returned Actor greedily once; per cell it reports
 * the share of searches **leaving zero** (best greedy fitness of a trained policy > 0),
 * the **env steps to the first non-zero** greedy fitness,
 * the **best fitness**, and
-* **what the best policies do** in their greedy rollout: upright share and signed full
-  turns per rod, end reason and step, the range each cart covers, and a behaviour label
-  (:func:`behaviour`).
+* **what the best policies do** in their greedy rollout (:func:`greedy_rollout`, the
+  behaviour descriptor of :mod:`lonlib.behaviour`): upright share and signed full turns per
+  rod, end reason and step, the carts' mean range, the fitness from perturbed starts, and
+  the behaviour label (one of :data:`lonlib.behaviour.LABELS`).
 
 Beside the grid, :func:`integrator_drift` measures each integrator's energy and momentum
 drift in a short motor-off, friction-off rollout (force model: the cart is free, so the
 cart-and-rod energy and horizontal momentum are both conserved by the continuous equations).
+Every episode here runs through the one rollout (:func:`lonlib.rollout.run_policy`).
 
 :func:`run_calibration` runs the cells in a process pool (one torch thread per worker) and
 writes each finished cell atomically to ``<out>/cells/<cell>.json`` (its Actors to
@@ -46,15 +48,12 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
+from lonlib import portable_math
+from lonlib.behaviour import describe_actors, label
 from lonlib.ddpg import DDPGConfig, local_search_batch
-from lonlib.nets import actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import (
-    CoupledPendulums,
-    EndReason,
-    PendulumConfig,
-    total_energy,
-    wrap_angle,
-)
+from lonlib.nets import actor_spec, critic_spec
+from lonlib.pendulum import PendulumConfig, total_energy, wrap_angle
+from lonlib.rollout import Scoring, run_policy
 from lonlib.store import atomic_write, read_json, write_json
 from lonlib.validation import (
     check_choice,
@@ -71,7 +70,10 @@ MOTORS = ("force", "acceleration", "velocity")
 INTEGRATORS = ("euler", "semi-implicit")
 REWARDS = ("height", "slow-height", "upright")
 CELL_PHYSICS = ("motor", "integrator", "motor_gain", "motor_tau", "reward")
-BEHAVIOURS = ("balances", "spins", "swings", "hangs", "ends early")
+# Version of what a stored cell's searches hold; part of the settings, so that cells stored
+# before the one rollout and behaviour descriptor (per-cart ``cart_range_<i>``, the study's
+# own labels, other arithmetic) are refused rather than mixed with new ones.
+RECORD_FORMAT = 2
 # Greedy fitness that only balancing reaches: every rod upright >= 90 % of the episode, swing-up
 # included (a spinning rod is upright about half the time: no optimum of the default grid, all
 # spinning or ending early, scores above 0.51); the study reports the env steps to the first.
@@ -244,6 +246,7 @@ class CalibrationConfig:
         # invalidate stored cells.
         for key in CELL_PHYSICS:
             out["env"].pop(key)
+        out["record_format"] = RECORD_FORMAT
         return out
 
     @classmethod
@@ -320,71 +323,66 @@ def with_overrides(
 
 
 # ---------------------------------------------------------------------------- rollouts
-def greedy_rollout(thetas: np.ndarray, env: PendulumConfig, seed: int = 0) -> pd.DataFrame:
-    """What each Actor (row of ``thetas [k, P]``) does in one greedy episode, all ``k``
-    batched: fitness, end reason and step, and per rod ``i`` its upright share (steps with
-    the rod upright / nominal steps, like the fitness), signed full turns (net rotation /
-    2 pi, positive = the tip turning towards +x from upright) and the range its cart covered
-    [m]. One row per Actor."""
-    thetas = np.atleast_2d(np.asarray(thetas, dtype=np.float32))
-    spec = actor_spec(env.n_carts)
-    sim = CoupledPendulums(env, len(thetas), seed)
-    upright = np.zeros(sim.x.shape)
-    angles = [sim.phi.copy()]
-    low, high = sim.x.copy(), sim.x.copy()
-    cos_upright = math.cos(env.upright_angle)
-    while not sim.done.all():
-        running = ~sim.done[:, None]
-        sim.step(forward_numpy(spec, thetas, sim.observe().astype(np.float32)))
-        angles.append(sim.phi.copy())  # an ended environment's angle stays frozen
-        upright += running * (np.cos(sim.phi) > cos_upright)
-        low, high = np.minimum(low, sim.x), np.maximum(high, sim.x)
-    rotation = net_turns(np.stack(angles))
+def greedy_rollout(
+    thetas: np.ndarray, env: PendulumConfig, scoring: Scoring | int | None = None
+) -> pd.DataFrame:
+    """What each Actor (row of ``thetas [k, P]``) does in its greedy episode: one row per
+    Actor, from :func:`lonlib.behaviour.describe_actors` (one batched rollout).
+
+    Columns: ``rollout_fitness`` (Algorithm 1 under the config's ``fitness_mode``, from the
+    nominal start: the fitness the search compared), ``fitness_all`` and ``fitness_mean``
+    (the same episode under both aggregations), ``end_reason`` (lower-case
+    :class:`~lonlib.pendulum.EndReason` name) and ``end_step`` (steps executed); per rod
+    ``i`` ``upright_share_<i>`` (steps with the rod upright / steps **executed**, not the
+    nominal steps the fitness divides by: a rod upright throughout an episode that ended
+    early reads 1) and ``turns_<i>`` (signed full turns); ``cart_range`` (max x - min x
+    [m], mean over carts); ``robust_mean`` and ``robust_min`` (the fitness from the
+    scoring's perturbed starts); ``behaviour`` (:func:`lonlib.behaviour.label`).
+
+    ``scoring`` gives the starts (:class:`lonlib.rollout.Scoring`, default ``Scoring()``);
+    an int is read as the nominal start's ``eval_seed`` (the former ``seed`` argument).
+    """
+    if scoring is None:
+        scoring = Scoring()
+    elif not isinstance(scoring, Scoring):
+        scoring = Scoring(eval_seed=int(scoring))
+    descriptors = describe_actors(np.atleast_2d(np.asarray(thetas)), env, scoring)
     rows = []
-    for b in range(len(thetas)):
-        row = {
-            "rollout_fitness": float(sim.fitness[b]),
-            "end_reason": EndReason(int(sim.end_reason[b])).name.lower(),
-            "end_step": int(sim.step_count[b]),
+    for d in descriptors:
+        row: dict[str, Any] = {
+            "rollout_fitness": d.fitness,
+            "fitness_all": d.fitness_all,
+            "fitness_mean": d.fitness_mean,
+            "end_reason": d.end_reason.lower(),
+            "end_step": d.end_step,
         }
-        for i in range(env.n_carts):
-            row[f"upright_share_{i}"] = float(upright[b, i] / env.steps)
-            row[f"turns_{i}"] = float(rotation[b, i])
-            row[f"cart_range_{i}"] = float(high[b, i] - low[b, i])
-        row["behaviour"] = behaviour(row, env.n_carts)
+        for i, (share, turns) in enumerate(zip(d.upright_share, d.turns, strict=True)):
+            row[f"upright_share_{i}"] = share
+            row[f"turns_{i}"] = turns
+        row.update(
+            {
+                "cart_range": d.cart_range,
+                "robust_mean": d.robust_mean,
+                "robust_min": d.robust_min,
+                "behaviour": label(d),
+            }
+        )
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def net_turns(angles: np.ndarray) -> np.ndarray:
-    """Signed net rotation, in turns, of angle sequences ``[T, ...]`` sampled every step.
-    Each step's change is wrapped into (-pi, pi], so a rod must turn less than half a turn
-    per step (157 rad/s at dt = 0.02 s; the sensors saturate at 5 pi = 15.7 rad/s)."""
-    return wrap_angle(np.diff(angles, axis=0)).sum(axis=0) / (2 * np.pi)
-
-
-def behaviour(row: dict[str, Any], n_carts: int) -> str:
-    """A label of a greedy rollout: ``ends early`` (collision, tether or boundary),
-    ``balances`` (every rod upright at least half of the episode and less than one net
-    turn: at most a swing-up's worth of rotation), ``spins`` (some rod turned two or more
-    full turns), ``hangs`` (no rod ever upright), else ``swings``."""
-    turns = [abs(row[f"turns_{i}"]) for i in range(n_carts)]
-    shares = [row[f"upright_share_{i}"] for i in range(n_carts)]
-    if row["end_reason"] != EndReason.STEP_LIMIT.name.lower():
-        return "ends early"
-    if min(shares) >= 0.5 and max(turns) < 1.0:
-        return "balances"
-    if max(turns) >= 2.0:
-        return "spins"
-    return "swings" if max(shares) > 0 else "hangs"
+def _motor_off(observation: np.ndarray) -> np.ndarray:
+    """The constant policy of :func:`integrator_drift`: command 0.5, no force."""
+    return np.full((len(observation), 1), 0.5)
 
 
 def integrator_drift(env: PendulumConfig, steps: int = 2000, swing: float = 0.02) -> pd.DataFrame:
     """Energy and momentum drift of each integrator with the motor and friction off.
 
     One cart (force model, ``env``'s masses, rod and dt), the rod released ``swing`` rad from
-    hanging, the cart at rest, ``steps`` control steps on an endless track. The continuous
-    equations conserve the energy ``E`` and the horizontal momentum
+    hanging, the cart at rest, ``steps`` control steps on an endless track, run by the one
+    rollout (:func:`lonlib.rollout.run_policy`, traced) with a constant zero-force command.
+    The continuous equations conserve the energy ``E`` and the horizontal momentum
     ``p = (M + m) x_dot + m l cos(phi) phi_dot``. Reports per integrator the largest
     ``|E - E0|`` [J] and ``|p - p0|`` [kg m/s], the final energy gain above the hanging rest
     relative to the start's, and the swing amplitude over the last tenth of the rollout
@@ -402,33 +400,30 @@ def integrator_drift(env: PendulumConfig, steps: int = 2000, swing: float = 0.02
             track_half_length_base=1e9,
             steps=steps,
             initial_noise=0.0,
+            initial_angle=math.pi,
         )
         m, l, big_m = cfg.pole_mass, cfg.pole_half_length, cfg.cart_mass
-        sim = CoupledPendulums(cfg)
-        sim.phi[:] = np.pi - swing
-
-        def energy_momentum(sim=sim, cfg=cfg, m=m, l=l, big_m=big_m):
-            e = total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)[0, 0]
-            p = (big_m + m) * sim.x_dot + m * l * np.cos(sim.phi) * sim.phi_dot
-            return e, p[0, 0]
-
-        e0, p0 = energy_momentum()
+        offsets = np.zeros((4, 1, 1))
+        offsets[2] = -swing  # phi = pi - swing: released from rest
+        trace = run_policy(_motor_off, cfg, offsets, trace=True).trace
+        # the start, then the state after every step, of the one episode: [steps + 1]
+        x_dot = np.concatenate([[0.0], trace.x_dot[:, 0, 0]])
+        phi = np.concatenate([[math.pi - swing], trace.phi[:, 0, 0]])
+        phi_dot = np.concatenate([[0.0], trace.phi_dot[:, 0, 0]])
+        if len(phi) != steps + 1:
+            raise RuntimeError(f"the drift rollout ended after {len(phi) - 1} of {steps} steps")
+        energy = total_energy(cfg, x_dot, phi, phi_dot)
+        momentum = (big_m + m) * x_dot + m * l * portable_math.cos(phi) * phi_dot
         bottom = -m * cfg.gravity * l
-        de = dp = amplitude = 0.0
-        for k in range(steps):
-            sim.step(np.full((1, 1), 0.5))
-            e, p = energy_momentum()
-            de, dp = max(de, abs(e - e0)), max(dp, abs(p - p0))
-            if k >= steps - max(steps // 10, 1):
-                amplitude = max(amplitude, float(np.pi - abs(wrap_angle(sim.phi)[0, 0])))
+        tail = phi[1 + steps - max(steps // 10, 1) :]
         rows.append(
             {
                 "integrator": integrator,
                 "steps": steps,
-                "energy_drift": de,
-                "momentum_drift": dp,
-                "energy_ratio": (e - bottom) / (e0 - bottom),
-                "amplitude_ratio": amplitude / swing,
+                "energy_drift": float(np.max(np.abs(energy[1:] - energy[0]))),
+                "momentum_drift": float(np.max(np.abs(momentum[1:] - momentum[0]))),
+                "energy_ratio": float((energy[-1] - bottom) / (energy[0] - bottom)),
+                "amplitude_ratio": float(np.max(np.pi - np.abs(wrap_angle(tail)))) / swing,
             }
         )
     return pd.DataFrame(rows)
@@ -456,7 +451,7 @@ def run_cell(cell: Cell, config: CalibrationConfig) -> tuple[dict[str, Any], np.
     omegas = np.stack([s[1] for s in streams])
     results = local_search_batch(thetas, omegas, env, config.hp, [s[2] for s in streams])
     best_thetas = np.stack([r.theta for r in results])
-    rollouts = greedy_rollout(best_thetas, env, config.hp.eval_seed)
+    rollouts = greedy_rollout(best_thetas, env, config.hp.scoring)
     searches = []
     for index, (result, rollout) in enumerate(
         zip(results, rollouts.to_dict("records"), strict=True)
@@ -591,7 +586,6 @@ __all__ = [
     "DEFAULT_CELLS",
     "CalibrationConfig",
     "Cell",
-    "behaviour",
     "greedy_rollout",
     "grid",
     "integrator_drift",

@@ -18,9 +18,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from lonlib.behaviour import LABELS
 from lonlib.calibration import (
     BALANCING_FITNESS,
-    BEHAVIOURS,
     CELL_COLUMNS,
     CalibrationConfig,
     history_summary,
@@ -57,8 +57,10 @@ def _per_rod(row: pd.Series, prefix: str, fmt: str) -> str:
 
 
 def cell_table(searches: pd.DataFrame, records: list[dict[str, Any]]) -> pd.DataFrame:
-    """One row per cell (columns :data:`CELL_COLUMNS`). The ``best_*`` columns describe the
-    cell's best search's rollout; per-rod values are joined with ``/``."""
+    """One row per cell (columns :data:`CELL_COLUMNS`). ``behaviours`` counts the searches
+    per label (:data:`lonlib.behaviour.LABELS`, most accomplished first). The ``best_*``
+    columns describe the cell's best search's rollout; per-rod values are joined with ``/``
+    (``best_cart_range`` is the mean over carts)."""
     seconds = {record["name"]: record["seconds"] for record in records}
     rows = []
     for name, group in searches.groupby("cell", sort=False):
@@ -84,12 +86,12 @@ def cell_table(searches: pd.DataFrame, records: list[dict[str, Any]]) -> pd.Data
                 "first_balancing_steps_max": balancing.max() if len(balancing) else np.nan,
                 "best_fitness": float(group["best_fitness"].max()),
                 "median_best_fitness": float(group["best_fitness"].median()),
-                "behaviours": ", ".join(f"{k} {counts[k]}" for k in BEHAVIOURS if k in counts),
+                "behaviours": ", ".join(f"{k} {counts[k]}" for k in LABELS if k in counts),
                 "best_upright_share": _per_rod(best, "upright_share_", ".2f"),
                 "best_turns": _per_rod(best, "turns_", "+.1f"),
                 "best_end_reason": best["end_reason"],
                 "best_end_step": int(best["end_step"]),
-                "best_cart_range": _per_rod(best, "cart_range_", ".2f"),
+                "best_cart_range": f"{best['cart_range']:.2f}",
                 "seconds": seconds[name],
             }
         )
@@ -125,8 +127,8 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
     lines = [
         "| motor | integrator | reward | left zero | env steps to first > 0: median (range) "
         f"| reached ≥ {BALANCING_FITNESS:g}: searches, env steps to it "
-        "| best fitness (median best) | behaviours | best search's rollout: upright share and "
-        "full turns per rod, end |",
+        "| best fitness (median best) | behaviours | best search's rollout: upright share (of "
+        "the steps run) and full turns per rod, end |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for _, row in cells.iterrows():

@@ -106,6 +106,20 @@ def _analyse(args: argparse.Namespace) -> None:
         print(f"summary and claims tables pasted into {readme}")
 
 
+def _verify(args: argparse.Namespace) -> None:
+    from lonlib.verify import verify_experiment
+
+    report = verify_experiment(args.dir, recordings=not args.no_recordings)
+    shown = report.findings if args.all else report.findings[: args.limit]
+    for finding in shown:
+        print(finding)
+    if len(shown) < len(report.findings):
+        print(f"... {len(report.findings) - len(shown)} more (--all shows every finding)")
+    print(report.summary())
+    if not report.ok:
+        raise SystemExit(1)
+
+
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import load_calibration, run_calibration, with_overrides
     from lonlib.calibration_report import readme_markers
@@ -186,6 +200,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="also paste the summary and claims tables between their markers in this file",
     )
     analysis.set_defaults(func=_analyse)
+
+    verify = sub.add_parser(
+        "verify",
+        help="replay every stored trial and recording from its stored Actor; exit 1 on a mismatch",
+    )
+    verify.add_argument("dir", help="experiment folder, e.g. data/reference")
+    verify.add_argument("--no-recordings", action="store_true", help="skip the recordings")
+    verify.add_argument("--limit", type=int, default=20, help="findings printed (default 20)")
+    verify.add_argument("--all", action="store_true", help="print every finding")
+    verify.set_defaults(func=_verify)
 
     calibrate = sub.add_parser(
         "calibrate", help="run (or resume) the physics calibration study into OUT"

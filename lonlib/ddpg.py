@@ -46,8 +46,8 @@ import torch
 from tqdm.auto import tqdm
 
 from lonlib.ddpg_update import LEARNERS, learner_class
-from lonlib.nets import NetSpec, actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.nets import NetSpec, actor_spec, critic_spec
+from lonlib.pendulum import CoupledPendulums, PendulumConfig
 from lonlib.random_streams import (
     EXPLORATION_NOISE,
     REPLAY_SAMPLES,
@@ -56,6 +56,7 @@ from lonlib.random_streams import (
     CounterStreams,
 )
 from lonlib.replay import ReplayBuffer
+from lonlib.rollout import Scoring, score_actors
 from lonlib.validation import check_choice, check_field_types, check_range
 
 
@@ -76,6 +77,12 @@ class DDPGConfig:
     the environment's ``initial_noise`` > 0). It is the same for every policy and every
     trial, so an optimum's fitness is a function of its parameters alone.
 
+    ``fitness_estimate``: what a greedy evaluation scores and so what the search keeps,
+    returns and Algorithm 2 compares: ``nominal`` (Algorithm 1 from the fixed start, the
+    paper) or ``robust`` (its mean over ``robust_starts`` starts perturbed by
+    U[-``robust_noise``, ``robust_noise``], drawn from ``robust_seed``, the same for every
+    policy; :class:`lonlib.rollout.Scoring`). Every trial records both, whichever is used.
+
     ``device`` and ``threads`` say where the computation runs, not what it computes.
 
     ``update``: ``"lean"`` (:class:`lonlib.ddpg_update.LeanDDPG`, hand-written passes, the
@@ -93,11 +100,26 @@ class DDPGConfig:
     min_steps: int = 60_000
     patience_steps: int = 40_000
     eval_seed: int = 0
+    fitness_estimate: str = "nominal"
+    robust_starts: int = 8
+    robust_noise: float = 0.01
+    robust_seed: int = 0
     plateau_tiebreak: bool = False
     count_start: bool = False
     device: str = "cpu"
     threads: int = 1
     update: str = "lean"
+
+    @property
+    def scoring(self) -> Scoring:
+        """How greedy evaluations score a policy (:class:`lonlib.rollout.Scoring`)."""
+        return Scoring(
+            estimate=self.fitness_estimate,
+            starts=self.robust_starts,
+            noise=self.robust_noise,
+            seed=self.robust_seed,
+            eval_seed=self.eval_seed,
+        )
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -116,6 +138,7 @@ class DDPGConfig:
                 f"at least once, got {self.warmup_steps!r}"
             )
         check_choice("update", self.update, LEARNERS)
+        _ = self.scoring  # validates fitness_estimate and the robust_* fields by name
         if self.min_steps > self.max_steps:
             raise ValueError(
                 f"min_steps must be <= max_steps ({self.max_steps}), got {self.min_steps!r}"
@@ -390,7 +413,7 @@ class SlotTrainer:
 
     def _start(self, slots, thetas, omegas, seeds, tags) -> None:
         now = time.perf_counter()
-        start_scores = greedy_scores(self.a_spec, thetas, self.env_config, self.hp.eval_seed)
+        start_scores = greedy_scores(thetas, self.env_config, self.hp.scoring)
         for j, slot in enumerate(slots):
             self.streams.set_seed(slot, seeds[j])
             self.replay.clear(slot)
@@ -551,7 +574,7 @@ class SlotTrainer:
         if not self.pending:
             return
         thetas = np.stack([entry[2] for entry in self.pending])
-        fitness, returns = greedy_scores(self.a_spec, thetas, self.env_config, self.hp.eval_seed)
+        fitness, returns = greedy_scores(thetas, self.env_config, self.hp.scoring)
         slot_of = {id(search): slot for slot, search in enumerate(self.searches) if search}
         for (search, record, theta, omega), f, r in zip(
             self.pending, fitness, returns, strict=True
@@ -572,9 +595,7 @@ class SlotTrainer:
         unjudged = [i for i in slots if self.searches[i].best[0] == -np.inf]
         if unjudged:  # no training episode ended: judge the Actor at the stop
             flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
-            fitness, returns = greedy_scores(
-                self.a_spec, flat_actor[unjudged], self.env_config, self.hp.eval_seed
-            )
+            fitness, returns = greedy_scores(flat_actor[unjudged], self.env_config, self.hp.scoring)
             for j, slot in enumerate(unjudged):
                 result = self.searches[slot].result
                 result.fitness = float(fitness[j])
@@ -671,21 +692,11 @@ def exploration_actions(mu: torch.Tensor, noise: torch.Tensor, noise_std: float)
 
 
 def greedy_scores(
-    spec: NetSpec, thetas: np.ndarray, env_config: PendulumConfig, eval_seed: int
+    thetas: np.ndarray, env_config: PendulumConfig, scoring: Scoring
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Greedy (noise-free) fitness (Algorithm 1) and reward return of ``m`` flat Actors
-    ``[m, P]``, evaluated as one batch: every Actor in its own environment, all from the
-    start a single evaluation with ``eval_seed`` draws, each with its own weights (a row's
-    numbers are bit for bit what that Actor scores alone)."""
-    thetas = np.asarray(thetas, dtype=np.float32)
-    policy = lambda obs: forward_numpy(spec, thetas, obs)  # noqa: E731
-    result = evaluate(policy, env_config, thetas.shape[0], eval_seed, same_start=True)
-    return result.fitness.copy(), result.episode_return
-
-
-def greedy_score(
-    spec: NetSpec, flat_theta: np.ndarray, env_config: PendulumConfig, eval_seed: int
-) -> tuple[float, float]:
-    """Greedy (noise-free) fitness (Algorithm 1) and reward return of one flat Actor."""
-    fitness, returns = greedy_scores(spec, np.asarray(flat_theta)[None], env_config, eval_seed)
-    return float(fitness[0]), float(returns[0])
+    """Greedy (noise-free) score of ``m`` flat Actors ``[m, P]`` by the one rollout
+    (:func:`lonlib.rollout.score_actors`): the fitness the scoring's estimate names and the
+    nominal episode's reward return (the plateau tie-breaker). A row's numbers are bit for
+    bit what that Actor scores alone, anywhere."""
+    scores = score_actors(thetas, env_config, scoring)
+    return scores.fitness.copy(), scores.episode_return.copy()

@@ -8,7 +8,8 @@ then the biases.
 
 :class:`BatchedMLP` holds ``k`` independent networks of one shape (``[k, out, in]`` weights)
 so ``k`` agents train in one batched matrix product; ``k = 1`` is the single-agent case.
-:func:`forward_numpy` evaluates fixed parameters in numpy (fastest for rollouts).
+:func:`forward_numpy` evaluates fixed parameters in numpy with defined arithmetic (the one
+greedy rollout's, :mod:`lonlib.rollout`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from functools import cached_property
 
 import numpy as np
 import torch
+
+from lonlib.portable_math import sigmoid
 
 HIDDEN = (20, 20, 20)
 
@@ -80,27 +83,29 @@ def critic_spec(n_carts: int) -> NetSpec:
     return NetSpec((11 * n_carts, *HIDDEN, 1), sigmoid_output=False)
 
 
-def _sigmoid(z: np.ndarray) -> np.ndarray:
-    return 0.5 * (1.0 + np.tanh(0.5 * z))  # overflow-free logistic
-
-
 def forward_numpy(spec: NetSpec, flat: np.ndarray, inputs: np.ndarray) -> np.ndarray:
-    """Evaluate fixed parameters in numpy.
+    """Evaluate fixed parameters in numpy with defined arithmetic (the greedy rollout's).
 
     ``flat`` is one vector ``[P]`` (shared by every row of ``inputs [B, in]``) or one vector
     per row ``[B, P]`` (row ``b`` evaluated by network ``b``, for batched evaluation of many
-    policies). Returns ``[B, out]``.
+    policies). Returns ``[B, out]`` in float64.
+
+    The arithmetic is defined, so that a row's output is the same bits whatever the batch,
+    the row's position, numpy's CPU dispatch or the CPU: parameters and inputs are cast to
+    float64 (exact); each neuron sums ``w[o, i] * h[i]`` strictly from ``i = 0`` upwards
+    (an ``add.accumulate``, sequential by definition, never a BLAS or SIMD reduction), then
+    adds its bias; the activation is :func:`lonlib.portable_math.sigmoid`.
     """
-    flat = np.asarray(flat)
-    h = np.asarray(inputs, dtype=flat.dtype)
+    flat = np.asarray(flat, dtype=np.float64)
+    h = np.asarray(inputs, dtype=np.float64)
+    if h.ndim != 2:
+        raise ValueError(f"inputs must have shape [B, {spec.sizes[0]}], got {h.shape}")
     layers = spec.unflatten(flat)
     for i, (weight, bias) in enumerate(layers):
-        if flat.ndim == 1:
-            h = h @ weight.T + bias
-        else:
-            h = np.einsum("bi,boi->bo", h, weight) + bias
+        products = h[:, None, :] * weight  # [B, out, in]; weight [out, in] or [B, out, in]
+        h = np.add.accumulate(products, axis=2)[:, :, -1] + bias
         if i < len(layers) - 1 or spec.sigmoid_output:
-            h = _sigmoid(h)
+            h = sigmoid(h)
     return h
 
 

@@ -126,6 +126,7 @@ from enum import IntEnum
 
 import numpy as np
 
+from lonlib import portable_math
 from lonlib.validation import check_choice, check_field_types, check_keys, check_range
 
 SENSORS_PER_CART = 10
@@ -298,9 +299,9 @@ def total_energy(
     m, big_m, l = config.pole_mass, config.cart_mass, config.pole_half_length
     return (
         0.5 * (big_m + m) * x_dot**2
-        + m * l * np.cos(phi) * x_dot * phi_dot
+        + m * l * portable_math.cos(phi) * x_dot * phi_dot
         + (2.0 / 3.0) * m * l**2 * phi_dot**2
-        + m * config.gravity * l * np.cos(phi)
+        + m * config.gravity * l * portable_math.cos(phi)
     )
 
 
@@ -350,9 +351,24 @@ class StepResult:
 
     reward: FloatArray
     upright: FloatArray  # this step's fitness increment before dividing by ``steps``
+    upright_each: np.ndarray  # [B, n] bool: each rod upright after this step (False if ended)
     terminated: np.ndarray  # ended by collision, tether or boundary on this step
     truncated: np.ndarray  # reached the step limit on this step
     end_reason: np.ndarray  # EndReason per environment (RUNNING if still going)
+
+
+# Per-environment state: what select() copies and a checkpoint stores.
+STATE_ARRAYS = (
+    "x",
+    "x_dot",
+    "phi",
+    "phi_dot",
+    "step_count",
+    "upright_sum",
+    "upright_all_sum",
+    "upright_mean_sum",
+    "end_reason",
+)
 
 
 class CoupledPendulums:
@@ -378,9 +394,11 @@ class CoupledPendulums:
         self.phi = np.full(shape, config.initial_angle)
         self.phi_dot = np.zeros(shape)
         self.step_count = np.zeros(self.batch_size, dtype=np.int64)
-        self.upright_sum = np.zeros(self.batch_size)
+        self.upright_sum = np.zeros(self.batch_size)  # by the config's fitness_mode
+        self.upright_all_sum = np.zeros(self.batch_size)  # steps with every rod upright
+        self.upright_mean_sum = np.zeros(self.batch_size)  # sum of the upright share
         self.end_reason = np.zeros(self.batch_size, dtype=np.int8)
-        self._cos_upright = math.cos(config.upright_angle)
+        self._cos_upright = float(portable_math.cos(np.float64(config.upright_angle)))
         self.rng = np.random.default_rng(seed)
         self.reset()
 
@@ -392,8 +410,20 @@ class CoupledPendulums:
 
     @property
     def fitness(self) -> FloatArray:
-        """``[B]`` running fitness (Algorithm 1): upright sum / nominal steps."""
+        """``[B]`` running fitness (Algorithm 1) under the config's ``fitness_mode``:
+        upright sum / nominal steps."""
         return self.upright_sum / self.config.steps
+
+    @property
+    def fitness_all(self) -> FloatArray:
+        """``[B]`` running fitness with "all rods upright" per step (the paper's text)."""
+        return self.upright_all_sum / self.config.steps
+
+    @property
+    def fitness_mean(self) -> FloatArray:
+        """``[B]`` running fitness with the share of upright rods per step (Algorithm 1's
+        double sum over steps and carts, divided by the carts)."""
+        return self.upright_mean_sum / self.config.steps
 
     def reset(self, mask: np.ndarray | None = None, noise: np.ndarray | None = None) -> None:
         """Put environments (all, or those where ``mask`` is true) in the initial state.
@@ -418,6 +448,8 @@ class CoupledPendulums:
         self.phi[index] = np.mod(self.phi[index], 2 * np.pi)
         self.step_count[index] = 0
         self.upright_sum[index] = 0.0
+        self.upright_all_sum[index] = 0.0
+        self.upright_mean_sum[index] = 0.0
         self.end_reason[index] = EndReason.RUNNING
 
     def select(self, index: np.ndarray | list[int]) -> CoupledPendulums:
@@ -427,7 +459,7 @@ class CoupledPendulums:
         out = CoupledPendulums.__new__(CoupledPendulums)
         out.__dict__.update(self.__dict__)
         out.batch_size = int(index.size)
-        for name in ("x", "x_dot", "phi", "phi_dot", "step_count", "upright_sum", "end_reason"):
+        for name in STATE_ARRAYS:
             setattr(out, name, getattr(self, name)[index].copy())
         return out
 
@@ -443,7 +475,7 @@ class CoupledPendulums:
         [m/s^2] or target speed [m/s], by motor model)."""
         cfg = self.config
         m, l, g = cfg.pole_mass, cfg.pole_half_length, cfg.gravity
-        sin, cos = np.sin(phi), np.cos(phi)
+        sin, cos = portable_math.sin_cos(phi)
         if cfg.motor == "force":
             total = cfg.cart_mass + m
             friction = cfg.cart_friction * np.sign(x_dot)
@@ -490,13 +522,13 @@ class CoupledPendulums:
         self.phi_dot = np.where(keep, phi_dot, self.phi_dot)
         self.step_count += running
 
-        cos = np.cos(self.phi)
-        upright_each = cos > self._cos_upright
-        if cfg.fitness_mode == "all":
-            upright = upright_each.all(axis=1).astype(np.float64)
-        else:
-            upright = upright_each.mean(axis=1)
-        upright *= running
+        cos = portable_math.cos(self.phi)
+        upright_each = (cos > self._cos_upright) & running[:, None]
+        upright_all = upright_each.all(axis=1).astype(np.float64)
+        upright_mean = upright_each.mean(axis=1)
+        self.upright_all_sum += upright_all
+        self.upright_mean_sum += upright_mean
+        upright = upright_all if cfg.fitness_mode == "all" else upright_mean
         self.upright_sum += upright
 
         reason = self._termination_reason()
@@ -517,6 +549,7 @@ class CoupledPendulums:
         return StepResult(
             reward=reward,
             upright=upright,
+            upright_each=upright_each,
             terminated=terminated,
             truncated=truncated,
             end_reason=np.where(running, self.end_reason, EndReason.RUNNING).astype(np.int8),
@@ -532,42 +565,3 @@ class CoupledPendulums:
             reason = np.where((gaps > cfg.tether_length).any(axis=1), EndReason.TETHER, reason)
             reason = np.where((gaps < cfg.cart_width).any(axis=1), EndReason.COLLISION, reason)
         return reason
-
-
-@dataclass
-class Evaluation:
-    """Algorithm 1 outcome for a batch of policies or environments (``[B]`` arrays)."""
-
-    fitness: FloatArray
-    end_reason: np.ndarray
-    steps: np.ndarray
-    episode_return: FloatArray  # sum of the config's reward over the episode
-
-
-def evaluate(
-    policy: Policy,
-    config: PendulumConfig,
-    batch_size: int = 1,
-    seed: int | np.random.Generator | None = None,
-    same_start: bool = False,
-) -> Evaluation:
-    """Fitness (Algorithm 1) of a deterministic policy run in ``batch_size`` environments.
-
-    ``policy`` maps normalised sensors ``[B, 10 n]`` to actions ``[B, n]``; a batch of
-    different policies is a single callable that evaluates row ``b`` with policy ``b``.
-    ``seed`` draws the initial-state noise (if any); with ``same_start`` every environment
-    starts from the state a batch of one would draw (so a row scores what it scores alone).
-    Stops as soon as every environment ended.
-    """
-    sim = CoupledPendulums(config, 1 if same_start else batch_size, seed)
-    if same_start and batch_size > 1:
-        sim = sim.select(np.zeros(batch_size, dtype=np.int64))
-    episode_return = np.zeros(sim.batch_size)
-    while not sim.done.all():
-        episode_return += sim.step(policy(sim.observe())).reward
-    return Evaluation(
-        fitness=sim.fitness,
-        end_reason=sim.end_reason.copy(),
-        steps=sim.step_count.copy(),
-        episode_return=episode_return,
-    )

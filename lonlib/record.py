@@ -28,49 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lonlib.nets import actor_spec, forward_numpy
-from lonlib.pendulum import CoupledPendulums, EndReason, PendulumConfig
+from lonlib.pendulum import PendulumConfig
+from lonlib.rollout import Rollout, Scoring, run_actors
 from lonlib.store import p_label
-
-
-@dataclass(frozen=True)
-class Rollout:
-    """A greedy episode, step by step (``T`` = steps executed)."""
-
-    x: np.ndarray  # [T, n] cart centres after each step
-    phi: np.ndarray  # [T, n]
-    sensors: np.ndarray  # [T, 10n] what the Actor saw before each step
-    actions: np.ndarray  # [T, n]
-    upright: np.ndarray  # [T, n] bool, after each step
-    fitness: np.ndarray  # [T] running fitness
-    end_reason: str
-
-
-def rollout(theta: np.ndarray, config: PendulumConfig, seed: int = 0) -> Rollout:
-    """Run the greedy Actor ``theta`` for one episode and keep every step."""
-    spec = actor_spec(config.n_carts)
-    sim = CoupledPendulums(config, 1, seed)
-    xs, phis, seen, acts, ups, fits = [], [], [], [], [], []
-    cos_limit = np.cos(config.upright_angle)
-    while not sim.done[0]:
-        obs = sim.observe()
-        action = forward_numpy(spec, theta, obs)
-        sim.step(action)
-        seen.append(obs[0])
-        acts.append(action[0])
-        xs.append(sim.x[0].copy())
-        phis.append(sim.phi[0].copy())
-        ups.append(np.cos(sim.phi[0]) > cos_limit)
-        fits.append(sim.fitness[0])
-    return Rollout(
-        x=np.array(xs),
-        phi=np.array(phis),
-        sensors=np.array(seen),
-        actions=np.array(acts),
-        upright=np.array(ups),
-        fitness=np.array(fits),
-        end_reason=EndReason(int(sim.end_reason[0])).name,
-    )
 
 
 def recording_name(p: float, run: int, fitness: float, label: str = "") -> str:
@@ -151,16 +111,37 @@ def recording_blueprint(config: PendulumConfig):
 
 
 def record(
-    theta: np.ndarray, config: PendulumConfig, path: str | Path, title: str = "lonlib optimum"
+    theta: np.ndarray,
+    config: PendulumConfig,
+    path: str | Path,
+    title: str = "lonlib optimum",
+    scoring: Scoring = Scoring(),
+    properties: dict[str, float | int | str] | None = None,
 ) -> Rollout:
-    """Simulate the greedy rollout of ``theta`` and save it as a rerun recording named
-    ``title`` in the viewer."""
+    """Run the greedy Actor ``theta`` from the nominal start by the one rollout (the episode
+    its fitness scores) and save it as a rerun recording named ``title`` in the viewer.
+
+    The recording's ``optimum`` property holds the episode's fitness under both
+    aggregations, its end reason and step, and ``properties`` (e.g. p, run, index and the
+    stored fitness). Returns the rollout (with its trace)."""
     import rerun as rr
 
-    episode = rollout(theta, config)
+    result = run_actors(theta, config, eval_seed=scoring.eval_seed, trace=True)
+    episode = result.trace.row(0, int(result.end_step[0]))
     steps, n = episode.x.shape
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id(path))
     rec.send_recording_name(title)
+    rec.send_property(
+        "optimum",
+        rr.AnyValues(
+            fitness=float(result.fitness[0]),
+            fitness_all=float(result.fitness_all[0]),
+            fitness_mean=float(result.fitness_mean[0]),
+            end_reason=result.end_reason_name(0),
+            end_step=int(result.end_step[0]),
+            **(properties or {}),
+        ),
+    )
     index = [
         rr.TimeColumn("step", sequence=np.arange(1, steps + 1)),
         rr.TimeColumn("time", duration=np.arange(1, steps + 1) * config.dt),
@@ -221,7 +202,7 @@ def record(
     rec.save(str(path), default_blueprint=recording_blueprint(config))
     rec.flush(timeout_sec=30)
     rec.disconnect()
-    return episode
+    return result
 
 
 def recorded_entities(path: str | Path) -> dict[str, int]:
@@ -270,3 +251,20 @@ def show_inline(path: str | Path, width: int | str = "auto", height: int = 560) 
     display(viewer)
     viewer.send_rrd(Path(path).read_bytes())
     viewer.set_time_ctrl("time", duration_nanos=0, play=True)  # play from the start, in real time
+
+
+def recording_properties(path: str | Path) -> dict[str, float | int | str]:
+    """The ``optimum`` property of a recording made by :func:`record` (fitness under both
+    aggregations, end reason and step, and e.g. p, run, index): empty if it has none."""
+    from rerun.chunk import RrdReader
+
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        if str(chunk.entity_path) != "/__properties/optimum":
+            continue
+        batch = chunk.to_record_batch()
+        return {
+            name: batch.column(name)[0][0].as_py()
+            for name in batch.schema.names
+            if not name.startswith("rerun.")
+        }
+    return {}

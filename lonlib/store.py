@@ -5,7 +5,8 @@ Layout::
     data/<experiment>/
         manifest.json                 configuration, lonlib version, git commit, packages, times
         p=<p>/run_<run>/trials.parquet    every local search of the run (the commit point)
-        p=<p>/run_<run>/optimum_<i>.npz   accepted optimum i: theta, omega (float32, compressed)
+        p=<p>/run_<run>/optimum_<i>.npz   optimum of local search i: theta, omega (float32,
+                                      compressed); older experiments kept accepted ones only
         p=<p>/run_<run>/history_<i>.parquet  local search i's training curve (per episode)
 
 Every file is written to a temporary name in the same folder (``.<name>.<random>.tmp``),
@@ -217,13 +218,14 @@ def history_path(root: Path, p: float, run: int, index: int) -> Path:
 def save_step(
     root: Path, p: float, run: int, trials: list[Trial], optimum: LocalOptimum | None
 ) -> None:
-    """Persist one finished local search: its training history and optimum (if accepted),
-    then the trials table (the commit point)."""
+    """Persist one finished local search: its training history and optimum (every trial's,
+    accepted or not, so that every stored number replays), then the trials table (the
+    commit point)."""
     last = trials[-1]
     if optimum is not None and optimum.history:
         path = history_path(root, p, run, last.index)
         atomic_write(path, parquet_bytes(pd.DataFrame(optimum.history)))
-    if optimum is not None and last.accepted:
+    if optimum is not None:
         buffer = io.BytesIO()
         np.savez_compressed(
             buffer,

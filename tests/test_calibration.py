@@ -8,12 +8,11 @@ import pandas as pd
 import pytest
 
 import lonlib.calibration as calibration
+from lonlib.behaviour import LABELS, describe, label
 from lonlib.calibration import (
-    BEHAVIOURS,
     CELL_COLUMNS,
     CalibrationConfig,
     Cell,
-    behaviour,
     greedy_rollout,
     grid,
     integrator_drift,
@@ -25,6 +24,7 @@ from lonlib.calibration_report import search_table
 from lonlib.cli import main as cli_main
 from lonlib.nets import actor_spec
 from lonlib.pendulum import PendulumConfig
+from lonlib.rollout import Scoring
 
 
 @pytest.fixture(scope="module")
@@ -71,12 +71,20 @@ def test_tiny_study_table_semantics(tiny_study):
     assert (searches["first_nonzero_steps"].dropna() <= config.max_steps).all()
     assert (searches["env_steps"] == config.max_steps).all()
     # the greedy replay reproduces the score of the Actor the search returned; with one
-    # cart, "all rods upright" is that rod's upright share
+    # cart, "all rods upright" is that rod's upright share of the executed steps, counted
+    # over the nominal steps
     np.testing.assert_allclose(searches["rollout_fitness"], searches["returned_fitness"])
-    np.testing.assert_allclose(searches["upright_share_0"], searches["rollout_fitness"])
-    assert set(searches["behaviour"]) <= set(BEHAVIOURS)
+    for column in ("fitness_all", "fitness_mean"):
+        np.testing.assert_allclose(searches[column], searches["rollout_fitness"])
+    np.testing.assert_allclose(
+        searches["upright_share_0"] * searches["end_step"] / config.env.steps,
+        searches["rollout_fitness"],
+    )
+    assert set(searches["behaviour"]) <= set(LABELS)
     assert (searches["end_step"] <= config.env.steps).all()
-    assert (searches["cart_range_0"] >= 0).all()
+    assert (searches["cart_range"] >= 0).all()
+    assert (searches["robust_min"] <= searches["robust_mean"]).all()
+    assert not any(c.startswith("cart_range_") for c in searches.columns)
     # the gain is blank for the velocity motor, the time constant for the others
     velocity = searches["motor"] == "velocity"
     assert searches.loc[velocity, "motor_gain"].isna().all()
@@ -120,6 +128,14 @@ def test_integrator_drift_over_an_episode_matches_the_known_amplitude_growth():
     drift = integrator_drift(PendulumConfig(), 2000).set_index("integrator")
     assert drift.loc["euler", "amplitude_ratio"] > 100  # ~x156: explicit Euler pumps
     assert drift.loc["semi-implicit", "amplitude_ratio"] == pytest.approx(1.0, abs=0.01)
+    # the table of the former hand-stepped loop (numpy's sin/cos), up to rounding noise
+    former = {
+        "euler": (1.421787481014766, 0.03126572002834238, 14121.313119874818, 156.2237466282012),
+        "semi-implicit": (4.0527065e-06, 8.4305115e-08, 1.0226298978839605, 1.0007220578634346),
+    }
+    columns = ["energy_drift", "momentum_drift", "energy_ratio", "amplitude_ratio"]
+    for integrator, values in former.items():
+        np.testing.assert_allclose(drift.loc[integrator, columns], values, rtol=1e-7)
 
 
 def test_a_killed_study_resumes_and_recomputes_only_the_missing_cell(
@@ -151,6 +167,44 @@ def test_a_folder_holding_other_settings_is_refused_before_any_compute(tiny_stud
         run_calibration(dataclasses.replace(config, seeds=3), out, progress=False)
 
 
+def test_cells_stored_in_the_former_record_format_are_refused(tiny_study, tmp_path):
+    # before the one rollout: per-cart cart ranges, the study's own labels, other arithmetic
+    config, out = tiny_study
+    cell = config.cells[0]
+    record = json.loads((out / "cells" / f"{cell.name}.json").read_text())
+    assert record["settings"]["record_format"] == calibration.RECORD_FORMAT
+    del record["settings"]["record_format"]
+    (tmp_path / "cells").mkdir()
+    (tmp_path / "cells" / f"{cell.name}.json").write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="other settings"):
+        calibration.read_cell(tmp_path, cell, config)
+
+
+def test_stored_rollouts_describe_the_stored_actors_under_the_studys_scoring(tiny_study):
+    config, out = tiny_study
+    searches = pd.read_csv(out / "searches.csv")
+    for cell in config.cells:
+        with np.load(out / "cells" / f"{cell.name}.npz") as data:
+            rows = greedy_rollout(data["theta"], cell.env(config.env), config.hp.scoring)
+        stored = searches[searches["cell"] == cell.name].reset_index(drop=True)
+        pd.testing.assert_frame_equal(stored[list(rows.columns)], rows, check_dtype=False)
+
+
+def test_a_cell_scores_its_rollouts_with_the_ddpg_scoring(monkeypatch):
+    tiny = named_calibration("tiny")
+    ddpg = dataclasses.replace(
+        tiny.ddpg, warmup_steps=50, robust_starts=3, robust_noise=0.02, robust_seed=9
+    )
+    config = dataclasses.replace(tiny, cells=tiny.cells[:1], seeds=1, max_steps=100, ddpg=ddpg)
+    seen = []
+    real = calibration.greedy_rollout
+    monkeypatch.setattr(
+        calibration, "greedy_rollout", lambda t, e, s: seen.append(s) or real(t, e, s)
+    )
+    calibration.run_cell(config.cells[0], config)
+    assert seen == [Scoring(starts=3, noise=0.02, seed=9)] == [config.hp.scoring]
+
+
 def constant_actor(action: float, n_carts: int = 1) -> np.ndarray:
     """An Actor whose output is ``action`` whatever it senses (zero weights, last bias)."""
     theta = np.zeros(actor_spec(n_carts).n_params, dtype=np.float32)
@@ -165,18 +219,21 @@ def test_greedy_rollout_reports_end_step_and_cart_range():
     # (x0 = 0.55 m) passes the 2.95 m track end with its edge at k = 58
     push = rows.iloc[0]
     assert (push["end_reason"], push["end_step"]) == ("boundary", 58)
-    assert push["cart_range_0"] == pytest.approx(0.04 * 58)
-    assert push["cart_range_1"] == pytest.approx(0.04 * 58)
-    assert push["behaviour"] == "ends early"
+    # the mean of the two carts' ranges: 58 steps of 0.04 m from the start (57 between the
+    # positions after the first and the last step, which the descriptor measures today)
+    assert 0.04 * 57 - 1e-6 <= push["cart_range"] <= 0.04 * 58 + 1e-6
+    assert push["behaviour"] == "stops at boundary"  # ended at a track end, early
     still = rows.iloc[1]  # never moves: the rods hang all episode
     assert (still["end_reason"], still["end_step"]) == ("step_limit", 2000)
-    assert still["cart_range_0"] == 0.0 and abs(still["turns_1"]) < 1e-9
-    assert still["upright_share_0"] == 0.0 and still["behaviour"] == "hangs"
+    assert still["cart_range"] == 0.0 and abs(still["turns_1"]) < 1e-9
+    assert still["upright_share_0"] == 0.0 and still["behaviour"] == "swinging low"
+    assert still["robust_mean"] == still["robust_min"] == 0.0
 
 
-def test_upright_share_counts_only_the_steps_an_episode_ran():
+def test_upright_share_is_of_the_executed_steps_the_fitness_of_the_nominal_ones():
     # A rod starting upright without gravity stays upright while a gently pushed cart runs
-    # into a near track end; its share is the steps it ran over the nominal 2000.
+    # into a near track end: upright all the steps it ran, so its share is 1, while the
+    # fitness counts them over the nominal 2000.
     env = PendulumConfig(
         n_carts=1,
         motor="acceleration",
@@ -189,32 +246,54 @@ def test_upright_share_counts_only_the_steps_an_episode_ran():
     rows = greedy_rollout(np.stack([constant_actor(1 - 1e-9), constant_actor(0.5)]), env)
     row = rows.iloc[0]
     assert row["end_reason"] == "boundary" and 100 < row["end_step"] < 2000
-    assert row["upright_share_0"] == row["end_step"] / 2000 == row["rollout_fitness"]
-    assert rows.iloc[1]["upright_share_0"] == 1.0
+    assert row["upright_share_0"] == 1.0
+    assert row["rollout_fitness"] == row["end_step"] / 2000
+    assert rows.iloc[1]["upright_share_0"] == 1.0 == rows.iloc[1]["rollout_fitness"]
 
 
-def test_net_turns_are_signed_and_survive_wrapping():
-    steps = np.arange(0, 20, 1.0)  # one radian per step, 19 rad in all
-    angles = np.stack([np.mod(steps, 2 * np.pi), np.mod(-steps, 2 * np.pi)], axis=1)
-    np.testing.assert_allclose(calibration.net_turns(angles), [19 / (2 * np.pi), -19 / (2 * np.pi)])
-
-
-@pytest.mark.parametrize(
-    ("end", "shares", "turns", "label"),
-    [
-        ("collision", (0.9, 0.9), (0.1, 0.1), "ends early"),
-        ("step_limit", (0.9, 0.6), (0.5, -0.9), "balances"),
-        ("step_limit", (0.9, 0.4), (0.5, -0.9), "swings"),
-        ("step_limit", (0.9, 0.6), (0.5, -1.5), "swings"),
-        ("step_limit", (0.5, 0.5), (0.5, -2.0), "spins"),
-        ("step_limit", (0.0, 0.0), (0.3, -0.5), "hangs"),
-    ],
-)
-def test_behaviour_labels(end, shares, turns, label):
-    row = {"end_reason": end}
-    for i in range(2):
-        row[f"upright_share_{i}"], row[f"turns_{i}"] = shares[i], turns[i]
-    assert behaviour(row, 2) == label
+def test_greedy_rollout_is_the_behaviour_descriptor_under_the_given_scoring():
+    env = PendulumConfig(n_carts=2, steps=150, initial_noise=0.05)
+    rng = np.random.default_rng(3)
+    thetas = np.stack([actor_spec(2).initial(rng) for _ in range(3)])
+    scoring = Scoring(starts=3, noise=0.02, seed=5, eval_seed=7)
+    rows = greedy_rollout(thetas, env, scoring)
+    assert list(rows.columns) == [
+        "rollout_fitness",
+        "fitness_all",
+        "fitness_mean",
+        "end_reason",
+        "end_step",
+        "upright_share_0",
+        "turns_0",
+        "upright_share_1",
+        "turns_1",
+        "cart_range",
+        "robust_mean",
+        "robust_min",
+        "behaviour",
+    ]
+    for b, row in rows.iterrows():
+        d = describe(thetas[b], env, scoring)  # one Actor alone: the same bits
+        assert row.to_dict() == {
+            "rollout_fitness": d.fitness,
+            "fitness_all": d.fitness_all,
+            "fitness_mean": d.fitness_mean,
+            "end_reason": d.end_reason.lower(),
+            "end_step": d.end_step,
+            "upright_share_0": d.upright_share[0],
+            "turns_0": d.turns[0],
+            "upright_share_1": d.upright_share[1],
+            "turns_1": d.turns[1],
+            "cart_range": d.cart_range,
+            "robust_mean": d.robust_mean,
+            "robust_min": d.robust_min,
+            "behaviour": label(d),
+        }
+    # an int is the nominal start's eval_seed (the former ``seed`` argument)
+    pd.testing.assert_frame_equal(
+        greedy_rollout(thetas, env, 7), greedy_rollout(thetas, env, Scoring(eval_seed=7))
+    )
+    assert not greedy_rollout(thetas, env, 8).equals(greedy_rollout(thetas, env, 7))
 
 
 def test_default_grid_covers_every_motor_and_integrator():

@@ -10,10 +10,10 @@ from lonlib.pendulum import (
     CoupledPendulums,
     EndReason,
     PendulumConfig,
-    evaluate,
     sensors,
     wrap_angle,
 )
+from lonlib.rollout import evaluate
 
 
 @pytest.mark.parametrize("n_carts", [1, 2])

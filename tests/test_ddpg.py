@@ -12,14 +12,14 @@ from lonlib.ddpg import (
     ReplayBuffer,
     SlotTrainer,
     exploration_actions,
-    greedy_score,
     is_improvement,
     local_search,
     local_search_batch,
 )
 from lonlib.nets import actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import PendulumConfig, StepResult, evaluate
+from lonlib.pendulum import PendulumConfig, StepResult
 from lonlib.random_streams import EXPLORATION_NOISE, CounterStreams
+from lonlib.rollout import evaluate, score_actors
 from tests.ddpg_reference import lonlib_updates, reference_updates
 
 SMALL = {"batch_size": 64, "buffer_size": 2000, "warmup_steps": 100, "min_steps": 0}
@@ -150,6 +150,7 @@ def test_only_a_true_end_is_stored_as_terminal_and_truncation_bootstraps():
     outcome = StepResult(
         reward=np.array([0.1, 0.2, 0.3]),
         upright=np.zeros(3),
+        upright_each=np.zeros((3, 1), dtype=bool),
         terminated=np.array([True, False, False]),
         truncated=np.array([False, True, False]),
         end_reason=np.zeros(3, dtype=np.int8),
@@ -194,7 +195,7 @@ def test_returned_parameters_rescore_to_the_returned_fitness(count_start):
     hp = DDPGConfig(max_steps=450, patience_steps=10**6, count_start=count_start, **SMALL)
     result = local_search(theta, omega, UPRIGHT_ENV, hp, seed=1)
     assert result.start_fitness == 1.0
-    rescored, _ = greedy_score(actor_spec(1), result.theta, UPRIGHT_ENV, hp.eval_seed)
+    rescored = score_actors(result.theta, UPRIGHT_ENV, hp.scoring).fitness[0]
     assert rescored == result.fitness
     if count_start:  # the start is seen and nothing trained beats a perfect score
         assert result.fitness == 1.0
@@ -215,7 +216,7 @@ def test_a_search_with_no_finished_training_episode_returns_the_trained_actor():
     assert result.history == [] or all(h.env_steps < 100 for h in result.history)
     assert not np.array_equal(result.theta, theta)
     assert not np.array_equal(result.omega, omega)
-    assert greedy_score(actor_spec(1), result.theta, env, hp.eval_seed)[0] == result.fitness
+    assert score_actors(result.theta, env, hp.scoring).fitness[0] == result.fitness
 
 
 def test_nan_parameters_are_refused_before_training():

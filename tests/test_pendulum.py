@@ -10,12 +10,12 @@ from lonlib.pendulum import (
     CoupledPendulums,
     EndReason,
     PendulumConfig,
-    evaluate,
     motor_command,
     sensors,
     total_energy,
     wrap_angle,
 )
+from lonlib.rollout import evaluate
 
 FRICTIONLESS = {"cart_friction": 0.0, "hinge_friction": 0.0}
 

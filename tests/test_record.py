@@ -14,10 +14,11 @@ from lonlib.record import (
     recorded_entities,
     recording_id,
     recording_name,
-    rollout,
+    recording_properties,
     scene,
     scene_bounds,
 )
+from lonlib.rollout import run_actors
 
 
 def test_recording_reads_back_with_entities_and_frames(tmp_path):
@@ -26,8 +27,8 @@ def test_recording_reads_back_with_entities_and_frames(tmp_path):
     theta[-2:] = 0.0  # output bias 0: the policy still acts from its sensors
     path = tmp_path / recording_name(1e-4, 3, 0.25)
     assert path.name == "optimum_p=0.0001_run=3_f=0.250.rrd"
-    episode = record(theta, config, path)
-    frames = len(episode.fitness)
+    episode = record(theta, config, path, properties={"p": 1e-4, "run": 3, "index": 7})
+    frames = int(episode.end_step[0])
     counts = recorded_entities(path)
     for entity in (
         "/world/carts",
@@ -66,7 +67,8 @@ def test_scene_hangs_hanging_rods_in_rerun_y_down_coordinates():
     (hanging) has its tip below the hinge on screen, an upright rod above it, carts sit
     above the track, and the view's bounds hold the track and every rod position."""
     config = PendulumConfig(n_carts=2, steps=50)
-    start = rollout(actor_spec(2).initial(np.random.default_rng(1)), config)
+    result = run_actors(actor_spec(2).initial(np.random.default_rng(1)), config, trace=True)
+    start = result.trace.row(0, int(result.end_step[0]))
     end = config.track_half_length - config.cart_width / 2
     x = np.vstack([start.x[:1], [[-end, end]], [[-end, end]]])
     phi = np.vstack([start.phi[:1], [[0.0, 0.0]], [[np.pi, np.pi]]])
@@ -85,14 +87,15 @@ def test_scene_hangs_hanging_rods_in_rerun_y_down_coordinates():
     assert np.all((points[:, 1] > y_low) & (points[:, 1] < y_high))
 
 
-def test_rollout_matches_the_fitness_evaluation():
-    from lonlib.nets import forward_numpy
-    from lonlib.pendulum import evaluate
-
+def test_a_recording_carries_and_replays_its_scored_episode(tmp_path):
     config = PendulumConfig(n_carts=1, steps=200)
     theta = actor_spec(1).initial(np.random.default_rng(5))
-    episode = rollout(theta, config)
-    direct = evaluate(lambda o: forward_numpy(actor_spec(1), theta, o), config)
-    assert episode.fitness[-1] == direct.fitness[0]
-    assert len(episode.fitness) == direct.steps[0]
-    assert episode.sensors.shape == (len(episode.fitness), 10)
+    path = tmp_path / "x.rrd"
+    episode = record(theta, config, path, properties={"p": 1e-3, "run": 2, "index": 4})
+    scored = run_actors(theta, config)
+    props = recording_properties(path)
+    assert props["fitness"] == scored.fitness[0] == episode.fitness[0]
+    assert props["end_step"] == scored.end_step[0] == episode.trace.fitness.shape[0]
+    assert (props["p"], props["run"], props["index"]) == (1e-3, 2, 4)
+    assert props["fitness_all"] == scored.fitness_all[0]
+    assert episode.trace.fitness[-1, 0] == scored.fitness[0]
