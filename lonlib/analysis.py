@@ -20,6 +20,13 @@ from lonlib.behaviour import descriptors_of
 from lonlib.behaviour_lon import behaviour_table, behavioural_lon
 from lonlib.claims import claims_from_trials, peaks_beside_paper
 from lonlib.claims_report import write_claims
+from lonlib.conditioning import (
+    conditioning_by_label,
+    edges_no_longer_improving,
+    replay_optima,
+    retention_curve,
+    stored_actors,
+)
 from lonlib.configs import ExperimentConfig
 from lonlib.lon import build_lon, node_id, sinks
 from lonlib.lon_metrics import lon_metrics
@@ -28,7 +35,9 @@ from lonlib.plots import (
     fitness_histogram,
     lon_3d,
     lon_3d_interactive,
+    nominal_beside_robust,
     optima_boxplot,
+    retention_plot,
     save_html,
     sensitivity,
 )
@@ -64,6 +73,9 @@ class Analysis:
     summary: pd.DataFrame = field(default_factory=pd.DataFrame)  # how far, what found, per p
     files: list[Path] = field(default_factory=list)
     figures: dict[str, plt.Figure] = field(default_factory=dict)
+    replayed: pd.DataFrame = field(default_factory=pd.DataFrame)  # stored Actors replayed
+    retention: pd.DataFrame = field(default_factory=pd.DataFrame)  # keep share over noise
+    conditioning: pd.DataFrame = field(default_factory=pd.DataFrame)  # per behaviour label
     interactive: dict[str, Any] = field(default_factory=dict)
 
 
@@ -73,6 +85,7 @@ def analyse(
     tolerance: float = 1e-9,
     bins: int = 50,
     close_figures: bool = False,
+    conditioning: bool = True,
 ) -> Analysis:
     """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, the
     paper's claims tested (``claims.csv``, ``claims.md``: :mod:`lonlib.claims`), the
@@ -82,7 +95,8 @@ def analyse(
 
     ``close_figures`` closes each matplotlib figure once saved (it stays in the result and
     can still be displayed), so a notebook's inline backend does not show every figure at
-    the end of the cell that called this."""
+    the end of the cell that called this. ``conditioning`` adds the nodes' conditioning
+    (replaying every stored Actor: about a minute for 40 optima on one core)."""
     folder = Path(folder)
     _, trials = load_experiment(folder)
     out = folder / "figures"
@@ -150,7 +164,57 @@ def analyse(
     result.files += write_claims(result.claims, result.claim_peaks, out)
     if trials["p"].nunique() > 2:
         save("sensitivity", sensitivity(result.metrics))
+    if conditioning:
+        _conditioning(folder, trials, result, save, out, bins, tolerance)
     return result
+
+
+def _conditioning(folder, trials, result, save, out, bins, tolerance) -> None:
+    """The nodes' conditioning (:mod:`lonlib.conditioning`): every stored Actor replayed
+    (``replayed.csv``), nominal beside robust Figs. 4-5, the retention curve and the table
+    per behaviour label; edges a re-scoring would make deteriorating."""
+    config, _ = load_experiment(folder)
+    replayed = replay_optima(folder, trials, config.env, config.ddpg.scoring)
+    result.replayed = replayed
+    if replayed.empty:
+        return
+    nodes = replayed[replayed["accepted"]]
+    curves = []
+    for p, group in nodes.groupby("p", sort=True):
+        label = p_label(p)
+        graph = build_lon(trials[trials["p"] == p], "max", tolerance)
+        sink_keys = {(graph.nodes[n]["run"], graph.nodes[n]["index"]) for n in sinks(graph)}
+        is_sink = [(r, i) in sink_keys for r, i in zip(group["run"], group["index"], strict=True)]
+        sink_rows = group[is_sink]
+        save(
+            f"fig4_sinks_robust_p={label}",
+            nominal_beside_robust(
+                sink_rows["replayed"], sink_rows["robust_mean"], f"sinks, p = {label}", bins
+            ),
+        )
+        save(
+            f"fig5_optima_robust_p={label}",
+            nominal_beside_robust(
+                group["replayed"], group["robust_mean"], f"optima, p = {label}", bins
+            ),
+        )
+        _, thetas = stored_actors(folder, trials.loc[trials["accepted"] & (trials["p"] == p)])
+        curves.append(
+            retention_curve(thetas, group["replayed"].to_numpy(), config.env, seed=0).assign(p=p)
+        )
+    result.retention = pd.concat(curves, ignore_index=True)
+    save("retention", retention_plot(result.retention))
+    result.conditioning = conditioning_by_label(nodes)
+    edges = edges_no_longer_improving(trials, replayed)
+    for name, table in (
+        ("replayed", replayed),
+        ("retention", result.retention),
+        ("conditioning", result.conditioning),
+        ("edges_rescored", edges),
+    ):
+        path = out / f"{name}.csv"
+        table.to_csv(path, index=False)
+        result.files.append(path)
 
 
 def slug(text: str) -> str:

@@ -69,6 +69,29 @@ MIN_OPTIMA = 10
 SPARSE_MAX_SHARE = 0.05
 """Claim d ("nodes are never visited by multiple inward edges") holds when at most this
 share of the nodes has more than one incoming edge: "never" with room for rare merges."""
+BEHAVIOUR_NODE_FEATURES = (
+    "upright_share_0",
+    "upright_share_1",
+    "turns_0",
+    "turns_1",
+    "phase",
+    "cart_range",
+    "cart_speed",
+    "end_share",
+)
+"""Claim d in behaviour space (pre-registered 2026-11-25, before data/reference-v2 stored a
+run): a node is a class of optima whose standardised behaviour descriptors (these ``b_*``
+columns of a two-cart trial, ``end_share`` = end step / nominal steps, each column z-scored
+over the p's optima) lie within :data:`BEHAVIOUR_NODE_EPSILON` (Euclidean) and whose
+fitness differs by at most :data:`BEHAVIOUR_NODE_FITNESS_TOLERANCE`, closed transitively
+(connected components of that graph). A parameter-level LON merges two optima only when
+their parameters or fitness are exactly equal, which two DDPG runs never produce, so claim
+d is true there by construction; in behaviour space two runs can reach the same node."""
+BEHAVIOUR_NODE_EPSILON = 0.5
+"""Distance (standard deviations, Euclidean over the features) within which two optima are
+one behaviour node; the report adds the share of multi-inward nodes as a curve over it."""
+BEHAVIOUR_NODE_FITNESS_TOLERANCE = 0.02
+"""Fitness difference (40 upright steps of 2000) within which two optima can be one node."""
 GAP = (0.6, 0.7)
 """Claim e's fitness interval, half-open, as the paper states it."""
 GAP_NEIGHBOURS = ((0.5, 0.6), (0.7, 0.8))

@@ -323,3 +323,42 @@ def sensitivity(
         ax.set_title(column)
     fig.tight_layout()
     return fig
+
+
+def nominal_beside_robust(
+    nominal: np.ndarray, robust: np.ndarray, title: str, bins: int = 50
+) -> plt.Figure:
+    """Figs. 4-5 under both fitness estimates: the histogram of the nominal fitness (what
+    the LON's nodes carry) and, beside it, of the same optima's robust mean (the fitness
+    over the perturbed starts), on one fitness axis and one count axis."""
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5), sharex=True, sharey=True)
+    for ax, values, name in zip(axes, (nominal, robust), ("nominal", "robust mean"), strict=True):
+        ax.hist(np.asarray(values, dtype=float), bins=bins, range=(0, 1), color=GREY)
+        ax.set_xlabel(f"fitness ({name})")
+        ax.set_title(f"{title}: {name} (n = {len(values)})", fontsize=9)
+        ax.yaxis.get_major_locator().set_params(integer=True)
+    axes[0].set_ylabel("count")
+    fig.tight_layout()
+    return fig
+
+
+def retention_plot(curve: pd.DataFrame) -> plt.Figure:
+    """The retention curve: per start-noise level, the share of optima keeping at least
+    half their nominal fitness, one line per p (``curve`` has ``p``, ``noise``,
+    ``keep_share``)."""
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for p, group in curve.groupby("p", sort=True):
+        ax.plot(
+            group["noise"],
+            group["keep_share"],
+            "o-",
+            label=f"p = {p:g} (n = {group['optima'].iloc[0]})",
+        )
+    ax.set_xscale("log")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("start noise (half-width of U[-noise, noise] on x, x_dot, phi, phi_dot)")
+    ax.set_ylabel("share keeping >= 1/2 fitness")
+    ax.set_title("Conditioning of the LON's nodes")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig

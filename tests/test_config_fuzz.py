@@ -226,10 +226,10 @@ def test_unknown_keys_are_refused_by_name(section, keys):
     keys = [k for k in keys if k not in known]
     if not keys:
         reject()
-    values = dict.fromkeys(keys, 1)
+    values = dict.fromkeys(keys, 1)  # 0 == False and 1 == True: one key each in a mapping
     with pytest.raises(ValueError, match="unknown") as refused:
         ExperimentConfig.from_mapping(values if section is None else {section: values})
-    for key in keys:
+    for key in values:
         assert repr(key) in str(refused.value)
 
 
