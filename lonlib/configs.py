@@ -148,9 +148,11 @@ QUICK_DDPG = DDPGConfig(
 )
 
 
-# Per p. The issue asked for >= 20; measured, a local search of the paper's DDPG costs ~3 ms
-# per env step on one core here (batch 2000), so 2 x 20 runs of ~8 searches x ~100k steps
-# would take ~27 core-hours: reduced to fit ~8 hours on 2 cores (README, "Reference").
+# Per p, of the committed data/reference (2 x 6 runs, 9.2M env steps, 8 h 50 on 2 cores:
+# ~145 agent-steps/s per core). Its successor, configs/reference-v2.yaml (2 x 10 runs, at
+# least 10 sinks per p so that claims a and b can be computed; ~15M env steps, ~29
+# core-hours on one core), is sampled into data/reference-v2/ and replaces it when finished
+# and verified; this becomes 10 then.
 REFERENCE_RUNS = 6
 
 
