@@ -362,6 +362,10 @@ class CoupledPendulums:
     until :meth:`reset` re-initialises them. There is no loop over carts or environments.
     """
 
+    # The per-environment state (``[B, n]`` or ``[B]`` arrays); the rest is configuration,
+    # its derived constants and the generator ``rng``.
+    STATE_ARRAYS = ("x", "x_dot", "phi", "phi_dot", "step_count", "upright_sum", "end_reason")
+
     def __init__(
         self,
         config: PendulumConfig,
@@ -427,7 +431,7 @@ class CoupledPendulums:
         out = CoupledPendulums.__new__(CoupledPendulums)
         out.__dict__.update(self.__dict__)
         out.batch_size = int(index.size)
-        for name in ("x", "x_dot", "phi", "phi_dot", "step_count", "upright_sum", "end_reason"):
+        for name in self.STATE_ARRAYS:
             setattr(out, name, getattr(self, name)[index].copy())
         return out
 
