@@ -271,8 +271,10 @@ def _read_tensors(checkpoint: InflightCheckpoint) -> dict[str, Any]:
     try:
         payload = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except Exception as error:  # whatever the file holds is refused: nothing in it runs
-        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error)
-        raise ValueError(f"{path}: refused, not tensors and plain data ({reason})") from None
+        raise ValueError(
+            f"{path}: refused, not tensors and plain data ({_load_error(error)}); nothing "
+            "in it was run"
+        ) from None
     if not (
         isinstance(payload, dict)
         and set(payload) == {"format", "write_id", "tensors"}
@@ -281,6 +283,16 @@ def _read_tensors(checkpoint: InflightCheckpoint) -> dict[str, Any]:
     ):
         raise ValueError(f"{path}: refused, not the data file its metadata describes")
     return payload["tensors"]
+
+
+def _load_error(error: Exception) -> str:
+    """The gist of a ``torch.load`` error: the restricted unpickler's own line (what it
+    refused), else the first sentence (torch's advice to retry unrestricted is left out)."""
+    lines = str(error).splitlines() or [type(error).__name__]
+    for line in lines:
+        if "WeightsUnpickler error:" in line:
+            return line.split("WeightsUnpickler error:")[1].split(". Please")[0].strip()
+    return lines[0].split(". ")[0].strip()
 
 
 def load_inflight(checkpoint: InflightCheckpoint, device: str | None = None) -> SlotTrainer:
