@@ -160,12 +160,12 @@ def _report_other_format(meta: Path, found: Any) -> None:
     _reported.add(meta)
     kind = "a pickled checkpoint of an older lonlib" if found == 2 else "another lonlib's"
     log.warning(
-        "%s: in-flight checkpoint of format %r (%s), this lonlib reads format %d: not read "
+        "%s: in-flight checkpoint of format %s (%s), this lonlib reads format %d: not read "
         "(nothing in it runs). Its runs continue from their stored trials, losing at most the "
         "minutes they had in flight. Delete %s.* (or, with no lockstep batch running, %s/) to "
         "silence this message",
         meta,
-        found,
+        repr(found)[:40],
         kind,
         FORMAT,
         meta.with_suffix(""),

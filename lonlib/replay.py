@@ -57,7 +57,7 @@ class ReplayBuffer:
         return {
             "position": torch.from_numpy(self.position.copy()),
             "size": torch.from_numpy(self.size.copy()),
-            "rows": rows.cpu().clone(),
+            "rows": rows.cpu(),  # cat made it: its own storage
         }
 
     @classmethod
@@ -76,11 +76,11 @@ class ReplayBuffer:
         out = cls(agents, capacity, obs_size, act_size, device)
         position = reader.take_numpy(f"{prefix}position", (agents,), torch.int64)
         size = reader.take_numpy(f"{prefix}size", (agents,), torch.int64)
-        full = size == capacity
         # A slot fills from row 0 after each clear, so below capacity it writes at its size.
-        if ((size < 0) | (size > capacity)).any() or (
-            (position != size) & ~full | (position < 0) | (position >= capacity)
-        ).any():
+        wrong_size = (size < 0) | (size > capacity)
+        wrong_position = (position < 0) | (position >= capacity)
+        wrong_position |= (size < capacity) & (position != size)
+        if (wrong_size | wrong_position).any():
             raise StateLayoutError(f"{prefix}: fill levels or positions outside the buffer")
         width = out.data.shape[2]
         rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32)

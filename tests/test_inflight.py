@@ -309,6 +309,14 @@ TENSOR_CASES = {
         lambda t: shaped(t, "replay.size", t["replay.size"] + 10_000),
         "fill levels or positions outside the buffer",
     ),
+    "a busy slot without a search": (
+        lambda t: shaped(t, "slots.busy", torch.ones_like(t["slots.busy"])),
+        "the busy slots are not the slots with a search",
+    ),
+    "a fraction in an episode count": (
+        lambda t: shaped(t, "searches.history", t["searches.history"] + 0.5),
+        "an integer column holds a fraction",
+    ),
     "history of other length": (
         lambda t: shaped(t, "searches.history", t["searches.history"][:-1]),
         "'searches.history' is",
