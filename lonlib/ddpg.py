@@ -36,6 +36,7 @@ dropped from the batch (:meth:`SlotTrainer.shrink`).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -48,6 +49,19 @@ from tqdm.auto import tqdm
 from lonlib.ddpg_update import LEARNERS, learner_class
 from lonlib.nets import NetSpec, actor_spec, critic_spec
 from lonlib.pendulum import CoupledPendulums, PendulumConfig
+from lonlib.plain_state import (
+    StateLayoutError,
+    TensorReader,
+    config_from_plain,
+    generator_from_state,
+    generator_state,
+    plain_bool,
+    plain_dict,
+    plain_float,
+    plain_int,
+    plain_list,
+    plain_str,
+)
 from lonlib.random_streams import (
     EXPLORATION_NOISE,
     REPLAY_SAMPLES,
@@ -252,6 +266,18 @@ def local_search_batch(
     return results
 
 
+# The per-slot numpy arrays of a SlotTrainer (its other per-slot tensor is ``loss_sum``).
+SLOT_ARRAYS = (
+    "busy",
+    "steps",
+    "updates",
+    "episodes",
+    "episode_return",
+    "last_improvement",
+    "dirty",
+    "loss_count",
+    "obs",
+)
 JUDGE_BATCH = 16  # at most this many queued greedy evaluations per batched rollout
 # Minibatch sizes that keep a batched agent's update bit-identical to its update alone
 # (measured: sizes that are not a multiple of 4 take other vector-loop paths by batch).
@@ -328,20 +354,34 @@ class SlotTrainer:
         k = len(seeds)
         if k < 1:
             raise ValueError("at least one local search is needed")
-        check_device(hp.device)
-        check_batch_size(hp, k)
-        n = env_config.n_carts
-        self.env_config, self.hp, self.n = env_config, hp, n
-        self.a_spec, self.c_spec = actor_spec(n), critic_spec(n)
+        self._configure(env_config, hp, k, hp.device)
         thetas = check_parameters("theta", thetas, self.a_spec.n_params, k)
         omegas = check_parameters("omega", omegas, self.c_spec.n_params, k)
-        torch.set_num_threads(hp.threads)
-        self.device = torch.device(hp.device)
         self.learner = make_learner(self.a_spec, self.c_spec, thetas, omegas, hp)
-        self.replay = ReplayBuffer(k, hp.buffer_size, env_config.observation_size, n, self.device)
+        self.replay = ReplayBuffer(
+            k, hp.buffer_size, env_config.observation_size, self.n, self.device
+        )
         self.streams = CounterStreams([0] * k, self.device)
         self.sim = CoupledPendulums(env_config, k)
         self.searches: list[_Search | None] = [None] * k
+        self._allocate_slots(k)
+        # Greedy evaluations wait in a queue and run as one batched rollout once there are
+        # ``judge_batch`` of them (or before a search they concern may stop).
+        self.pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]] = []
+        self.judge_batch = min(k, JUDGE_BATCH)
+        self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
+
+    def _configure(self, env_config: PendulumConfig, hp: DDPGConfig, k: int, device: str) -> None:
+        """Settings of a batch of ``k`` slots computing on ``device``."""
+        check_device(device)
+        check_batch_size(hp, k)
+        self.env_config, self.hp, self.n = env_config, hp, env_config.n_carts
+        self.a_spec, self.c_spec = actor_spec(self.n), critic_spec(self.n)
+        torch.set_num_threads(hp.threads)  # the thread count can change float reductions
+        self.device = torch.device(device)
+
+    def _allocate_slots(self, k: int) -> None:
+        """The per-slot counters and buffers (:data:`SLOT_ARRAYS`, ``loss_sum``), zero."""
         self.busy = np.zeros(k, dtype=bool)
         self.steps = np.zeros(k, dtype=np.int64)  # env steps of each slot's search
         self.updates = np.zeros(k, dtype=np.int64)
@@ -351,18 +391,7 @@ class SlotTrainer:
         self.dirty = np.zeros(k, dtype=bool)  # learner state changed while in the warm-up
         self.loss_sum = torch.zeros(2, k, dtype=torch.float64, device=self.device)
         self.loss_count = np.zeros(k, dtype=np.int64)
-        self.obs = np.zeros((k, env_config.observation_size), dtype=np.float32)
-        # Greedy evaluations wait in a queue and run as one batched rollout once there are
-        # ``judge_batch`` of them (or before a search they concern may stop).
-        self.pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]] = []
-        self.judge_batch = min(k, JUDGE_BATCH)
-        self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
-
-    def __setstate__(self, state: dict) -> None:
-        """Unpickle (an in-flight checkpoint) with this process's torch threads set as the
-        batch's were: the thread count can change float reductions."""
-        self.__dict__.update(state)
-        torch.set_num_threads(self.hp.threads)
+        self.obs = np.zeros((k, self.env_config.observation_size), dtype=np.float32)
 
     @property
     def slots(self) -> int:
@@ -616,6 +645,85 @@ class SlotTrainer:
         self.busy[slots] = False
         return finished
 
+    # ------------------------------------------------------------------ checkpoints
+    def to_checkpoint(self) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+        """The whole batch as plain data (JSON-able: settings, searches, queue, stream
+        seeds, generator state) and named CPU tensors (networks, targets, Adam state,
+        replay buffers, environments, counters): nothing names a Python class.
+        :meth:`from_checkpoint` continues it bit for bit. Needs the lean learner."""
+        if not hasattr(self.learner, "load_state"):
+            raise ValueError(f"the {self.hp.update!r} learner cannot be checkpointed; use 'lean'")
+        tensors = {f"slots.{name}": _tensor(getattr(self, name)) for name in SLOT_ARRAYS}
+        tensors["slots.loss_sum"] = self.loss_sum.cpu().clone()
+        for name, array in self.learner.state().items():
+            tensors[f"learner.{name}"] = _tensor(array)
+        tensors["learner.adam_steps"] = _tensor(self.learner.steps)
+        for name, tensor in self.replay.state_tensors().items():
+            tensors[f"replay.{name}"] = tensor
+        for name in CoupledPendulums.STATE_ARRAYS:
+            tensors[f"sim.{name}"] = _tensor(getattr(self.sim, name))
+        searches, search_tensors = _searches_to_checkpoint(
+            self.searches, self.pending, self.a_spec.n_params, self.c_spec.n_params
+        )
+        tensors.update(search_tensors)
+        plain = {
+            "slots": self.slots,
+            "env": dataclasses.asdict(self.env_config),
+            "ddpg": dataclasses.asdict(self.hp),
+            "judge_batch": self.judge_batch,
+            "stream_seeds": list(self.streams.seeds),
+            "sim_generator": generator_state(self.sim.rng),
+            **searches,
+        }
+        return plain, tensors
+
+    @staticmethod
+    def checkpoint_configs(plain: Any) -> tuple[PendulumConfig, DDPGConfig]:
+        """The environment and DDPG settings a batch in :meth:`to_checkpoint`'s ``plain``
+        data was trained with (:class:`~lonlib.plain_state.StateLayoutError` if absent or
+        invalid)."""
+        plain = plain_dict(plain, "trainer", CHECKPOINT_KEYS)
+        env_config = config_from_plain(PendulumConfig, plain["env"], "trainer.env")
+        return env_config, config_from_plain(DDPGConfig, plain["ddpg"], "trainer.ddpg")
+
+    @classmethod
+    def from_checkpoint(cls, plain: Any, tensors: Any, device: str | None = None) -> SlotTrainer:
+        """The batch :meth:`to_checkpoint` exported, continuing bit for bit, on ``device``
+        (default: the device it was trained on). Everything is checked against the layout
+        of a batch of its settings and slots before it is used: a missing, extra or
+        misshapen tensor or value raises :class:`~lonlib.plain_state.StateLayoutError`."""
+        env_config, hp = cls.checkpoint_configs(plain)
+        k = plain_int(plain["slots"], "trainer.slots", 1, 100_000)
+        if hp.update != "lean":
+            raise StateLayoutError(f"trainer.ddpg.update must be 'lean', got {hp.update!r}")
+        reader = TensorReader(tensors)
+        trainer = cls.__new__(cls)
+        trainer._configure(env_config, hp, k, hp.device if device is None else device)
+        trainer._allocate_slots(k)
+        for name in SLOT_ARRAYS:
+            setattr(trainer, name, reader.take_like(f"slots.{name}", getattr(trainer, name)))
+        trainer.loss_sum = reader.take_like("slots.loss_sum", trainer.loss_sum)
+        trainer.learner = _learner_from_checkpoint(reader, trainer)
+        obs_size, n = env_config.observation_size, trainer.n
+        trainer.replay = ReplayBuffer.from_state(
+            reader, "replay.", k, hp.buffer_size, obs_size, n, trainer.device
+        )
+        seeds = plain_list(plain["stream_seeds"], "trainer.stream_seeds", k)
+        try:
+            trainer.streams = CounterStreams(seeds, trainer.device)
+        except ValueError as error:
+            raise StateLayoutError(f"trainer.stream_seeds: {error}") from None
+        trainer.sim = CoupledPendulums(env_config, k)
+        for name in CoupledPendulums.STATE_ARRAYS:
+            setattr(trainer.sim, name, reader.take_like(f"sim.{name}", getattr(trainer.sim, name)))
+        trainer.sim.rng = generator_from_state(plain["sim_generator"], "trainer.sim_generator")
+        trainer.searches, trainer.pending = _searches_from_checkpoint(plain, reader, trainer)
+        trainer.judge_batch = plain_int(plain["judge_batch"], "trainer.judge_batch", 1)
+        reader.finish()
+        if not np.array_equal(trainer.busy, [s is not None for s in trainer.searches]):
+            raise StateLayoutError("trainer: the busy slots are not the slots with a search")
+        return trainer
+
     # ------------------------------------------------------------------ fewer slots
     def shrink(self) -> None:
         """Drop the free slots so that the batch carries only busy ones (no work for
@@ -653,26 +761,21 @@ class SlotTrainer:
         self.searches = [self.searches[i] for i in keep]
         kept = {id(search) for search in self.searches}
         self.pending = [item for item in self.pending if id(item[0]) in kept]
-        for name in (
-            "busy",
-            "steps",
-            "updates",
-            "episodes",
-            "episode_return",
-            "last_improvement",
-            "dirty",
-            "loss_count",
-            "obs",
-        ):
+        for name in SLOT_ARRAYS:
             setattr(self, name, getattr(self, name)[keep])
         self.loss_sum = self.loss_sum[:, torch.as_tensor(keep, device=self.device)]
 
 
 def make_learner(
-    a_spec: NetSpec, c_spec: NetSpec, thetas: np.ndarray, omegas: np.ndarray, hp: DDPGConfig
+    a_spec: NetSpec,
+    c_spec: NetSpec,
+    thetas: np.ndarray,
+    omegas: np.ndarray,
+    hp: DDPGConfig,
+    device: torch.device | None = None,
 ):
     """The learner ``hp.update`` names for ``k`` agents starting from ``thetas``, ``omegas``
-    (targets copied from them, Adam state empty) on ``hp.device``."""
+    (targets copied from them, Adam state empty) on ``device`` (default ``hp.device``)."""
     return learner_class(hp.update)(
         a_spec,
         c_spec,
@@ -681,7 +784,7 @@ def make_learner(
         learning_rate=hp.learning_rate,
         gamma=hp.gamma,
         tau=hp.tau,
-        device=torch.device(hp.device),
+        device=torch.device(hp.device if device is None else device),
     )
 
 
@@ -700,3 +803,264 @@ def greedy_scores(
     bit what that Actor scores alone, anywhere."""
     scores = score_actors(thetas, env_config, scoring)
     return scores.fitness.copy(), scores.episode_return.copy()
+
+
+# ---------------------------------------------------------------------- checkpoint layout
+# The plain data of SlotTrainer.to_checkpoint, and of each search in it.
+CHECKPOINT_KEYS = frozenset(
+    {
+        "slots",
+        "env",
+        "ddpg",
+        "judge_batch",
+        "stream_seeds",
+        "sim_generator",
+        "history_columns",
+        "searches",
+        "pending",
+    }
+)
+SEARCH_KEYS = frozenset(
+    {
+        "tag",
+        "best",
+        "started",
+        "pending",
+        "fitness",
+        "start_fitness",
+        "env_steps",
+        "seconds",
+        "stop_reason",
+        "updates",
+        "final_evaluation",
+        "episodes",
+    }
+)
+LEARNER_STATE = (
+    "actor",
+    "actor_target",
+    "actor_exp_avg",
+    "actor_exp_avg_sq",
+    "critic",
+    "critic_target",
+    "critic_exp_avg",
+    "critic_exp_avg_sq",
+)
+HISTORY_COLUMNS = tuple(f.name for f in dataclasses.fields(EpisodeRecord))
+_INT_COLUMNS = [f.type in ("int", int) for f in dataclasses.fields(EpisodeRecord)]
+_SCALARS = (str, int, float, bool, type(None))
+
+
+def _tensor(array: np.ndarray) -> torch.Tensor:
+    """A CPU tensor of its own (exactly its bytes: no larger storage is saved with it)."""
+    return torch.from_numpy(np.array(array, copy=True))
+
+
+def _rows(arrays: list[np.ndarray], width: int) -> torch.Tensor:
+    """Flat float32 vectors stacked as ``[m, width]`` (``m`` may be zero)."""
+    stacked = np.stack(arrays) if arrays else np.zeros((0, width))
+    return torch.from_numpy(stacked.astype(np.float32))
+
+
+def _plain_tag(tag: Any) -> Any:
+    """A slot's tag as plain data: a number, text, None, or a tuple of them (as a list)."""
+    if isinstance(tag, np.generic):
+        tag = tag.item()
+    if isinstance(tag, tuple):
+        tag = [t.item() if isinstance(t, np.generic) else t for t in tag]
+        if all(isinstance(t, _SCALARS) for t in tag):
+            return tag
+    elif isinstance(tag, _SCALARS):
+        return tag
+    raise ValueError(f"a checkpointed slot's tag must be plain data or a tuple of it: {tag!r}")
+
+
+def _tag_from_plain(value: Any, name: str) -> Any:
+    """:func:`_plain_tag` reversed (a list is a tuple)."""
+    if isinstance(value, list) and all(isinstance(v, _SCALARS) for v in value):
+        return tuple(value)
+    if isinstance(value, _SCALARS):
+        return value
+    raise StateLayoutError(f"{name} must be plain data or a list of it, got {value!r}")
+
+
+def _search_to_plain(search: _Search) -> dict[str, Any]:
+    """A search's bookkeeping but its parameters and history (tensors) as plain data."""
+    result = search.result
+    return {
+        "tag": _plain_tag(search.tag),
+        "best": [float(search.best[0]), float(search.best[1])],
+        "started": float(search.started),
+        "pending": int(search.pending),
+        "fitness": float(result.fitness),
+        "start_fitness": float(result.start_fitness),
+        "env_steps": int(result.env_steps),
+        "seconds": float(result.seconds),
+        "stop_reason": str(result.stop_reason),
+        "updates": int(result.updates),
+        "final_evaluation": bool(result.final_evaluation),
+        "episodes": len(result.history),
+    }
+
+
+def _searches_to_checkpoint(
+    searches: list[_Search | None],
+    pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]],
+    a_size: int,
+    c_size: int,
+) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+    """The slots' searches and the queued evaluations: plain data (a queued evaluation is
+    its slot and the index of its episode in that search's history) and tensors."""
+    held = [search for search in searches if search is not None]
+    slot_of = {id(search): slot for slot, search in enumerate(searches) if search}
+    queue = []
+    for search, record, _, _ in pending:
+        history = search.result.history
+        index = next(i for i in range(len(history) - 1, -1, -1) if history[i] is record)
+        queue.append([slot_of[id(search)], index])
+    history = [[getattr(r, c) for c in HISTORY_COLUMNS] for s in held for r in s.result.history]
+    plain = {
+        "history_columns": list(HISTORY_COLUMNS),
+        "searches": [None if s is None else _search_to_plain(s) for s in searches],
+        "pending": queue,
+    }
+    tensors = {
+        "searches.theta": _rows([s.theta for s in held], a_size),
+        "searches.omega": _rows([s.omega for s in held], c_size),
+        "searches.best_theta": _rows([s.result.theta for s in held], a_size),
+        "searches.best_omega": _rows([s.result.omega for s in held], c_size),
+        "searches.history": torch.tensor(history, dtype=torch.float64).reshape(
+            -1, len(HISTORY_COLUMNS)
+        ),
+        "pending.theta": _rows([item[2] for item in pending], a_size),
+        "pending.omega": _rows([item[3] for item in pending], c_size),
+    }
+    return plain, tensors
+
+
+def _search_fields(entry: Any, name: str) -> dict[str, Any]:
+    """A search's plain data (:func:`_search_to_plain`), every value checked."""
+    entry = plain_dict(entry, name, SEARCH_KEYS)
+    best = plain_list(entry["best"], f"{name}.best", 2)
+    fields = {"tag": _tag_from_plain(entry["tag"], f"{name}.tag")}
+    fields["best"] = tuple(plain_float(v, f"{name}.best") for v in best)
+    for key in ("started", "fitness", "start_fitness", "seconds"):
+        fields[key] = plain_float(entry[key], f"{name}.{key}")
+    for key in ("pending", "env_steps", "updates", "episodes"):
+        fields[key] = plain_int(entry[key], f"{name}.{key}", 0)
+    fields["stop_reason"] = plain_str(entry["stop_reason"], f"{name}.stop_reason")
+    fields["final_evaluation"] = plain_bool(entry["final_evaluation"], f"{name}.final_evaluation")
+    return fields
+
+
+def _history(rows: np.ndarray) -> list[EpisodeRecord]:
+    """Episode records from ``[m, len(HISTORY_COLUMNS)]`` float64 rows."""
+    ints = rows[:, _INT_COLUMNS]
+    if not (np.isfinite(ints) & (ints == np.round(ints))).all():
+        raise StateLayoutError("searches.history: an integer column holds a fraction")
+    kinds = [int if is_int else float for is_int in _INT_COLUMNS]
+    return [
+        EpisodeRecord(*(kind(v) for kind, v in zip(kinds, row.tolist(), strict=True)))
+        for row in rows
+    ]
+
+
+def _searches_from_checkpoint(
+    plain: dict[str, Any], reader: TensorReader, trainer: SlotTrainer
+) -> tuple[list[_Search | None], list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]]]:
+    """:func:`_searches_to_checkpoint` reversed, every value checked."""
+    k = len(trainer.busy)
+    a_size, c_size = trainer.a_spec.n_params, trainer.c_spec.n_params
+    columns = plain_list(plain["history_columns"], "trainer.history_columns")
+    if tuple(columns) != HISTORY_COLUMNS:
+        raise StateLayoutError(f"trainer.history_columns: {columns}, expected {HISTORY_COLUMNS}")
+    entries = plain_list(plain["searches"], "trainer.searches", k)
+    fields = [
+        None if entry is None else _search_fields(entry, f"trainer.searches[{slot}]")
+        for slot, entry in enumerate(entries)
+    ]
+    held = [slot for slot, entry in enumerate(fields) if entry is not None]
+    arrays = {
+        name: reader.take_numpy(f"searches.{name}", (len(held), size), torch.float32)
+        for name, size in (
+            ("theta", a_size),
+            ("omega", c_size),
+            ("best_theta", a_size),
+            ("best_omega", c_size),
+        )
+    }
+    total = sum(fields[slot]["episodes"] for slot in held)
+    rows = reader.take_numpy("searches.history", (total, len(HISTORY_COLUMNS)), torch.float64)
+    searches: list[_Search | None] = [None] * k
+    offset = 0
+    for j, slot in enumerate(held):
+        f = fields[slot]
+        history = _history(rows[offset : offset + f["episodes"]])
+        offset += f["episodes"]
+        result = LocalSearchResult(
+            fitness=f["fitness"],
+            theta=arrays["best_theta"][j].copy(),
+            omega=arrays["best_omega"][j].copy(),
+            start_fitness=f["start_fitness"],
+            env_steps=f["env_steps"],
+            seconds=f["seconds"],
+            stop_reason=f["stop_reason"],
+            updates=f["updates"],
+            final_evaluation=f["final_evaluation"],
+            history=history,
+        )
+        theta, omega = arrays["theta"][j].copy(), arrays["omega"][j].copy()
+        searches[slot] = _Search(f["tag"], theta, omega, result, f["best"], f["started"])
+        searches[slot].pending = f["pending"]
+    return searches, _pending_from_checkpoint(plain, reader, searches, a_size, c_size)
+
+
+def _pending_from_checkpoint(
+    plain: dict[str, Any],
+    reader: TensorReader,
+    searches: list[_Search | None],
+    a_size: int,
+    c_size: int,
+) -> list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]]:
+    """The queued evaluations: each names a slot with a search and an episode of its
+    history, and every search queues as many as its count says."""
+    queue = plain_list(plain["pending"], "trainer.pending")
+    thetas = reader.take_numpy("pending.theta", (len(queue), a_size), torch.float32)
+    omegas = reader.take_numpy("pending.omega", (len(queue), c_size), torch.float32)
+    pending = []
+    for i, item in enumerate(queue):
+        slot, index = plain_list(item, f"trainer.pending[{i}]", 2)
+        search = searches[plain_int(slot, f"trainer.pending[{i}] slot", 0, len(searches) - 1)]
+        if search is None:
+            raise StateLayoutError(f"trainer.pending[{i}]: slot {slot} holds no search")
+        history = search.result.history
+        index = plain_int(index, f"trainer.pending[{i}] episode", 0, len(history) - 1)
+        pending.append((search, history[index], thetas[i], omegas[i]))
+    for slot, search in enumerate(searches):
+        if search is not None and search.pending != sum(item[0] is search for item in pending):
+            raise StateLayoutError(f"trainer.searches[{slot}].pending: not its queued count")
+    return pending
+
+
+def _learner_from_checkpoint(reader: TensorReader, trainer: SlotTrainer) -> Any:
+    """The lean learner of ``trainer``'s slots from the ``learner.*`` tensors (Eq. 1 order
+    and Adam step counts)."""
+    k = len(trainer.busy)
+    sizes = {"actor": trainer.a_spec.n_params, "critic": trainer.c_spec.n_params}
+    arrays = {
+        name: reader.take_numpy(f"learner.{name}", (k, sizes[name.split("_")[0]]), torch.float32)
+        for name in LEARNER_STATE
+    }
+    steps = reader.take_numpy("learner.adam_steps", (k,), torch.int64)
+    if (steps < 0).any():
+        raise StateLayoutError("learner.adam_steps: negative step counts")
+    learner = make_learner(
+        trainer.a_spec,
+        trainer.c_spec,
+        arrays["actor"],
+        arrays["critic"],
+        trainer.hp,
+        trainer.device,
+    )
+    learner.load_state(arrays, steps)
+    return learner

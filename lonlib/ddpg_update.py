@@ -196,8 +196,8 @@ class LeanDDPG:
         )
 
     def __setstate__(self, state: dict) -> None:
-        """Unpickle (an in-flight checkpoint): on the CPU the host Adam coefficients are the
-        device tensor's memory, which pickling copies apart, so join them again."""
+        """A copy (``copy.deepcopy``): on the CPU the host Adam coefficients are the device
+        tensor's memory, which copying separates, so join them again."""
         self.__dict__.update(state)
         if self._coefficients.device.type == "cpu":
             self._coefficients_host = self._coefficients.numpy()
@@ -235,6 +235,25 @@ class LeanDDPG:
             "critic_exp_avg": self._paper(c, self.critic_moments[0]),
             "critic_exp_avg_sq": self._paper(c, self.critic_moments[1]),
         }
+
+    def load_state(self, state: dict[str, np.ndarray], steps: np.ndarray) -> None:
+        """Take every learned quantity from :meth:`state`'s arrays (``[k, P]``, Eq. 1
+        order; all eight names) and the agents' Adam step counts ``steps [k]``: the learner
+        then updates exactly as the one that exported them."""
+        a, c = self.actor_layout, self.critic_layout
+        pairs = (
+            (self.actor_params[1], a, "actor"),
+            (self.actor_params[0], a, "actor_target"),
+            (self.actor_moments[0], a, "actor_exp_avg"),
+            (self.actor_moments[1], a, "actor_exp_avg_sq"),
+            (self.critic_params[0], c, "critic"),
+            (self.critic_params[1], c, "critic_target"),
+            (self.critic_moments[0], c, "critic_exp_avg"),
+            (self.critic_moments[1], c, "critic_exp_avg_sq"),
+        )
+        for target, layout, name in pairs:
+            target.copy_(self._internal(layout, state[name]))
+        self.steps[:] = steps
 
     def reset_agent(self, agent: int, theta: np.ndarray, omega: np.ndarray) -> None:
         """Restart slot ``agent`` from ``theta``/``omega``: targets copied from them, Adam

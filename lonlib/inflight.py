@@ -4,12 +4,28 @@ The stored trials are the experiment's results (:mod:`lonlib.store`); a search s
 training when the process dies would be lost with them alone. At the paper's batch a search
 runs for an hour or more on a laptop core, so the lockstep executor also writes its whole
 batch (a :class:`lonlib.ddpg.SlotTrainer`: networks, targets, Adam state, replay buffers,
-random stream counters, environments, queued greedy evaluations) every few minutes::
+random stream seeds, environments, queued greedy evaluations) every few minutes::
 
-    data/<experiment>/.inflight/<id>.<write>.pt   the pickled batch (torch.save), atomic
-    data/<experiment>/.inflight/<id>.json         its data file, runs, their stored-trial
-                                                  counts and env steps: the commit point,
-                                                  written after the data file
+    data/<experiment>/.inflight/<id>.<write>.pt   the batch's tensors, atomic: a torch.save
+                                                  of {"format", "write_id", "tensors": {name:
+                                                  tensor}}, read with weights_only=True
+    data/<experiment>/.inflight/<id>.json         the commit point, written after the data
+                                                  file: format, write_id, data file, runs,
+                                                  their stored-trial counts and env steps,
+                                                  and "trainer", the batch's plain data
+                                                  (settings, searches, queue, stream seeds,
+                                                  the simulator's generator state)
+
+Data, not code: the batch is exported by :meth:`lonlib.ddpg.SlotTrainer.to_checkpoint` as
+named tensors and JSON that name no Python class, and read back with ``torch.load(...,
+weights_only=True)`` (which builds tensors and plain containers only) and :mod:`json`, every
+tensor's shape and dtype and every value's kind checked against a batch of the stored
+settings before anything is used (:meth:`~lonlib.ddpg.SlotTrainer.from_checkpoint`). So a
+planted or damaged file is refused (and removed) without running anything, and a checkpoint
+does not depend on module paths or class layouts. Every checkpoint carries :data:`FORMAT`;
+one of another format, such as the pickled checkpoints (format 2) of lonlib before, is
+refused with a message and left in place: its runs continue from their stored trials.
+There is no converter: reading format 2 means unpickling it, the hazard this format removes.
 
 A write never replaces the data file the metadata points to: a kill at any moment leaves the
 previous checkpoint whole. The batch's process removes its superseded data files; a process
@@ -26,11 +42,9 @@ progress, never results: deleting ``.inflight/`` costs at most the searches in f
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import json
 import logging
-import pickle
 import time
 import uuid
 from dataclasses import dataclass
@@ -39,16 +53,17 @@ from typing import Any
 
 import torch
 
+from lonlib.ddpg import DDPGConfig, SlotTrainer
+from lonlib.pendulum import PendulumConfig
+from lonlib.plain_state import StateLayoutError, plain_dict, plain_float, plain_str
 from lonlib.store import atomic_write
 
 log = logging.getLogger(__name__)
 
 INFLIGHT_FOLDER = ".inflight"
-FORMAT = 2
-# Digest of the names of the attributes a SlotTrainer and its parts hold (layout_digest):
-# a checkpoint written with another layout is stale. tests/test_lockstep.py fails when the
-# layout changes, asking for the new value here.
-LAYOUT_DIGEST = "a20ab573a108"
+# The checkpoint layout's version: bump it when SlotTrainer.to_checkpoint's layout changes
+# (tests/test_inflight.py fails until the new layout is written down there).
+FORMAT = 3
 Job = tuple[float, int]
 
 
@@ -93,96 +108,198 @@ def new_checkpoint_path(out: str | Path) -> Path:
 
 
 def inflight_checkpoints(out: str | Path) -> list[InflightCheckpoint]:
-    """The committed checkpoints of experiment ``out``, most searches first (metadata that
-    cannot be read or does not add up is reported and skipped)."""
+    """The committed checkpoints of experiment ``out``, most searches first. Metadata that
+    cannot be read or does not add up is reported and skipped; so is a checkpoint of another
+    :data:`FORMAT` (once per process), which is never read further."""
     found = []
     for meta in sorted(inflight_folder(out).glob("*.json")):
         try:
             payload = json.loads(meta.read_text())
-            runs = tuple((float(p), int(run)) for p, run in payload["runs"])
-            trials = tuple(int(n) for n in payload["trials"])
-            steps = tuple(int(n) for n in payload["steps"])
-            if payload["format"] != FORMAT or not len(runs) == len(trials) == len(steps):
-                raise ValueError("another format, or runs, trials and steps of other lengths")
-            found.append(
-                InflightCheckpoint(
-                    metadata_path=meta,
-                    data_path=meta.parent / str(payload["data"]),
-                    write_id=str(payload["write_id"]),
-                    runs=runs,
-                    trials=trials,
-                    steps=steps,
-                    saved=float(payload["saved"]),
-                )
-            )
+            if not isinstance(payload, dict):
+                raise ValueError("not a JSON object")
+            if payload.get("format") != FORMAT:
+                _report_other_format(meta, payload.get("format"))
+                continue
+            found.append(_listed(meta, payload))
         except (OSError, ValueError, KeyError, TypeError) as error:
             log.warning("%s: unreadable in-flight checkpoint skipped (%s)", meta, error)
     return sorted(found, key=lambda c: -len(c.runs))
 
 
-def layout_digest(trainer: Any) -> str:
-    """A digest of the attribute names of ``trainer`` and of its learner, replay buffer,
-    streams and simulator: what a checkpoint's pickle must match to be resumed here."""
-    parts = {"trainer": trainer}
-    parts.update({name: getattr(trainer, name) for name in ("learner", "replay", "streams", "sim")})
-    names = {key: sorted(vars(part)) for key, part in parts.items()}
-    return hashlib.sha256(json.dumps(names, sort_keys=True).encode()).hexdigest()[:12]
+def _listed(meta: Path, payload: dict[str, Any]) -> InflightCheckpoint:
+    """The checkpoint whose metadata ``meta`` holds ``payload`` (raises if it does not add
+    up, or names a data file other than its own)."""
+    runs = tuple((float(p), int(run)) for p, run in payload["runs"])
+    trials = tuple(int(n) for n in payload["trials"])
+    steps = tuple(int(n) for n in payload["steps"])
+    if not len(runs) == len(trials) == len(steps):
+        raise ValueError("runs, trials and steps of other lengths")
+    write_id = plain_str(payload["write_id"], "write_id")
+    data = f"{meta.stem}.{write_id}.pt"
+    if payload["data"] != data:
+        raise ValueError(f"its data file must be {data}, not {payload['data']!r}")
+    return InflightCheckpoint(
+        metadata_path=meta,
+        data_path=meta.parent / data,
+        write_id=write_id,
+        runs=runs,
+        trials=trials,
+        steps=steps,
+        saved=float(payload["saved"]),
+    )
 
 
-def save_inflight(metadata_path: Path, trainer: Any, trials: dict[Job, int]) -> None:
-    """Write ``trainer`` (a :class:`lonlib.ddpg.SlotTrainer`) as the checkpoint committed by
-    ``metadata_path``, with the number of stored trials of each run it trains (``trials``,
-    keyed by the slots' tags); then remove the data file it supersedes."""
+_reported: set[Path] = set()
+
+
+def _report_other_format(meta: Path, found: Any) -> None:
+    """Say (once per process) that the checkpoint ``meta`` of format ``found`` is not read,
+    what that costs, and how to silence it."""
+    if meta in _reported:
+        return
+    _reported.add(meta)
+    kind = "a pickled checkpoint of an older lonlib" if found == 2 else "another lonlib's"
+    log.warning(
+        "%s: in-flight checkpoint of format %s (%s), this lonlib reads format %d: not read "
+        "(nothing in it runs). Its runs continue from their stored trials, losing at most the "
+        "minutes they had in flight. Delete %s.* (or, with no lockstep batch running, %s/) to "
+        "silence this message",
+        meta,
+        repr(found)[:40],
+        kind,
+        FORMAT,
+        meta.with_suffix(""),
+        meta.parent,
+    )
+
+
+def save_inflight(metadata_path: Path, trainer: SlotTrainer, trials: dict[Job, int]) -> None:
+    """Write ``trainer`` as the checkpoint committed by ``metadata_path``, with the number
+    of stored trials of each run it trains (``trials``, keyed by the slots' tags): its
+    tensors first, then the metadata with its plain data; then remove the data file it
+    supersedes."""
     write_id = uuid.uuid4().hex[:12]
     data_path = metadata_path.with_name(f"{metadata_path.stem}.{write_id}.pt")
     busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
     runs = [trainer.tags()[slot] for slot in busy]
+    plain, tensors = trainer.to_checkpoint()
     buffer = io.BytesIO()
-    payload = {
-        "format": FORMAT,
-        "layout": LAYOUT_DIGEST,
-        "write_id": write_id,
-        "clock": time.perf_counter(),
-        "trainer": trainer,
-    }
-    torch.save(payload, buffer)
+    torch.save({"format": FORMAT, "write_id": write_id, "tensors": tensors}, buffer)
     atomic_write(data_path, buffer.getvalue())
     metadata = {
         "format": FORMAT,
         "write_id": write_id,
         "data": data_path.name,
         "saved": time.time(),
+        "clock": time.perf_counter(),
         "runs": [list(run) for run in runs],
         "trials": [trials[run] for run in runs],
         "steps": [int(trainer.steps[slot]) for slot in busy],
+        "trainer": plain,
     }
     atomic_write(metadata_path, json.dumps(metadata, indent=1).encode())
     remove_leftovers(metadata_path, keep=data_path)
 
 
-def load_inflight(checkpoint: InflightCheckpoint, device: str = "cpu") -> Any:
-    """The :class:`lonlib.ddpg.SlotTrainer` stored in ``checkpoint`` (on ``device``, the
-    device it was trained on: the caller checks the configuration), its search clocks
-    moved so that time spent dead does not count as search time.
+METADATA_KEYS = frozenset(
+    {"format", "write_id", "data", "saved", "clock", "runs", "trials", "steps", "trainer"}
+)
 
-    Raises :class:`CheckpointUnreadable` if the file cannot be read now, ``ValueError`` if
-    it is not a batch this code can continue (truncated, another format or layout)."""
+
+@dataclass(frozen=True)
+class StoredBatch:
+    """A checkpoint's batch as read: plain data and tensors, nothing built from them yet."""
+
+    source: Path  # the data file
+    plain: dict[str, Any]  # SlotTrainer.to_checkpoint's plain data
+    tensors: dict[str, Any]  # and its tensors
+    clock: float  # time.perf_counter() at the write
+
+    def settings(self) -> tuple[PendulumConfig, DDPGConfig]:
+        """The environment and DDPG settings the batch was trained with (``ValueError``
+        if they are missing or invalid)."""
+        try:
+            return SlotTrainer.checkpoint_configs(self.plain)
+        except StateLayoutError as error:
+            raise ValueError(f"{self.source}: refused, {error}") from None
+
+    def trainer(self, device: str | None = None) -> SlotTrainer:
+        """The batch, on ``device`` (default: where it was trained), its search clocks moved
+        so that time spent dead does not count as search time. ``ValueError`` (naming the
+        first misfit) if anything in it does not fit a batch of its settings."""
+        try:
+            trainer = SlotTrainer.from_checkpoint(self.plain, self.tensors, device)
+        except (StateLayoutError, TypeError, KeyError, IndexError, RuntimeError) as error:
+            raise ValueError(f"{self.source}: refused, {error}") from None
+        trainer.resume_clocks(time.perf_counter() - self.clock)
+        return trainer
+
+
+def read_inflight(checkpoint: InflightCheckpoint) -> StoredBatch:
+    """The batch stored in ``checkpoint``, read without running anything in it: JSON, and
+    tensors with ``torch.load(..., weights_only=True)``.
+
+    Raises :class:`CheckpointUnreadable` if a file cannot be read now, ``ValueError`` if
+    they are not a pair of this format's files (truncated, planted, another format)."""
+    meta = checkpoint.metadata_path
     try:
-        # Our own pickled batch (this experiment's folder), hence weights_only=False.
-        payload = torch.load(checkpoint.data_path, map_location=device, weights_only=False)
+        payload = plain_dict(json.loads(meta.read_text()), str(meta), METADATA_KEYS)
     except FileNotFoundError as error:
-        raise ValueError(f"{checkpoint.data_path}: missing") from error
+        raise ValueError(f"{meta}: missing") from error
     except OSError as error:
-        raise CheckpointUnreadable(f"{checkpoint.data_path}: {error}") from error
-    except (pickle.UnpicklingError, EOFError, RuntimeError, AttributeError, ImportError) as error:
-        raise ValueError(f"{checkpoint.data_path}: cannot be unpickled ({error})") from error
-    if not isinstance(payload, dict) or payload.get("write_id") != checkpoint.write_id:
-        raise ValueError(f"{checkpoint.data_path}: not the batch its metadata describes")
-    if payload.get("format") != FORMAT or payload.get("layout") != LAYOUT_DIGEST:
-        raise ValueError(f"{checkpoint.data_path}: written by another version of lonlib")
+        raise CheckpointUnreadable(f"{meta}: {error}") from error
+    except ValueError as error:  # not JSON, or not the keys of this format
+        raise ValueError(f"{meta}: refused, {error}") from None
+    if payload["format"] != FORMAT or payload["write_id"] != checkpoint.write_id:
+        raise ValueError(f"{meta}: rewritten since it was listed")
+    clock = plain_float(payload["clock"], f"{meta}: clock")
     trainer = payload["trainer"]
-    trainer.resume_clocks(time.perf_counter() - payload["clock"])
-    return trainer
+    if not isinstance(trainer, dict):
+        raise ValueError(f"{meta}: refused, trainer must be a mapping")
+    return StoredBatch(checkpoint.data_path, trainer, _read_tensors(checkpoint), clock)
+
+
+def _read_tensors(checkpoint: InflightCheckpoint) -> dict[str, Any]:
+    """The named tensors of ``checkpoint``'s data file (checked to be its own write)."""
+    path = checkpoint.data_path
+    try:
+        data = path.read_bytes()  # an error here is the file system's, past it the content's
+    except FileNotFoundError as error:
+        raise ValueError(f"{path}: missing") from error
+    except OSError as error:
+        raise CheckpointUnreadable(f"{path}: {error}") from error
+    try:
+        payload = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except Exception as error:  # whatever the file holds is refused: nothing in it runs
+        raise ValueError(
+            f"{path}: refused, not tensors and plain data ({_load_error(error)}); nothing "
+            "in it was run"
+        ) from None
+    if not (
+        isinstance(payload, dict)
+        and set(payload) == {"format", "write_id", "tensors"}
+        and payload["format"] == FORMAT
+        and payload["write_id"] == checkpoint.write_id
+    ):
+        raise ValueError(f"{path}: refused, not the data file its metadata describes")
+    return payload["tensors"]
+
+
+def _load_error(error: Exception) -> str:
+    """The gist of a ``torch.load`` error: the restricted unpickler's own line (what it
+    refused), else the first sentence (torch's advice to retry unrestricted is left out)."""
+    lines = str(error).splitlines() or [type(error).__name__]
+    for line in lines:
+        if "WeightsUnpickler error:" in line:
+            return line.split("WeightsUnpickler error:")[1].split(". Please")[0].strip()
+    return lines[0].split(". ")[0].strip()
+
+
+def load_inflight(checkpoint: InflightCheckpoint, device: str | None = None) -> SlotTrainer:
+    """The :class:`lonlib.ddpg.SlotTrainer` stored in ``checkpoint``, on ``device`` (default:
+    where it was trained; the caller checks the settings, :meth:`StoredBatch.settings`).
+    Raises as :func:`read_inflight` and :meth:`StoredBatch.trainer`."""
+    return read_inflight(checkpoint).trainer(device)
 
 
 def remove_leftovers(metadata_path: Path, keep: Path | None = None) -> None:
@@ -205,7 +322,7 @@ def remove_inflight(metadata_path: Path) -> None:
         checkpoint_lock_path(metadata_path).unlink()
 
 
-def split_inflight(checkpoint: InflightCheckpoint, parts: int, device: str = "cpu") -> None:
+def split_inflight(checkpoint: InflightCheckpoint, parts: int, device: str | None = None) -> None:
     """Replace ``checkpoint`` by ``parts`` checkpoints of about equal numbers of its runs
     (for as many processes; each part continues its searches exactly as the whole would).
     Raises as :func:`load_inflight`, or :class:`lonlib.store.DataWriteError` (then no part

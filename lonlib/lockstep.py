@@ -37,8 +37,8 @@ from lonlib.inflight import (
     InflightCheckpoint,
     checkpoint_lock_path,
     inflight_checkpoints,
-    load_inflight,
     new_checkpoint_path,
+    read_inflight,
     remove_inflight,
     remove_leftovers,
     save_inflight,
@@ -327,7 +327,8 @@ def _restore(
     on since the write (unlocked). Each of its runs must be one of ``jobs`` or have ended.
     ``None`` (every lock released) if a run is held by another process or is someone else's
     job, or the file cannot be read now or was trained with other settings (kept), or if no
-    slot continues or it cannot be unpickled here (removed: stale)."""
+    slot continues or its files are refused (truncated, planted, another layout: removed,
+    stale)."""
     runs: list[_Run] = []
     stale = None
     try:
@@ -337,17 +338,20 @@ def _restore(
                 return None
         remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
         try:
-            trainer = load_inflight(checkpoint, config.ddpg.device)
-        except ValueError as error:  # truncated, or written by another version
+            stored = read_inflight(checkpoint)
+            env_config, hp = stored.settings()
+            if hp == config.ddpg and env_config == config.env:
+                trainer = stored.trainer()
+        except ValueError as error:  # truncated, planted, or not of this layout
             stale = str(error)
             return None
-        if trainer.hp != config.ddpg or trainer.env_config != config.env:
+        if hp != config.ddpg or env_config != config.env:
             log.warning(
                 "%s: in-flight checkpoint trained with device=%r, threads=%d: resume with those "
                 "to continue it; its runs restart from their stored trials",
                 checkpoint.metadata_path,
-                trainer.hp.device,
-                trainer.hp.threads,
+                hp.device,
+                hp.threads,
             )
             return None
         dropped = _slots_gone_on(checkpoint, trainer, runs)

@@ -357,26 +357,26 @@ class StepResult:
     end_reason: np.ndarray  # EndReason per environment (RUNNING if still going)
 
 
-# Per-environment state: what select() copies and a checkpoint stores.
-STATE_ARRAYS = (
-    "x",
-    "x_dot",
-    "phi",
-    "phi_dot",
-    "step_count",
-    "upright_sum",
-    "upright_all_sum",
-    "upright_mean_sum",
-    "end_reason",
-)
-
-
 class CoupledPendulums:
     """``B`` independent coupled-pendulum environments stepped together (arrays ``[B, n]``).
 
     Environments that have ended stay frozen (state, step count and fitness unchanged)
     until :meth:`reset` re-initialises them. There is no loop over carts or environments.
     """
+
+    # The per-environment state (``[B, n]`` or ``[B]`` arrays); the rest is configuration,
+    # its derived constants and the generator ``rng``.
+    STATE_ARRAYS = (
+        "x",
+        "x_dot",
+        "phi",
+        "phi_dot",
+        "step_count",
+        "upright_sum",
+        "upright_all_sum",
+        "upright_mean_sum",
+        "end_reason",
+    )
 
     def __init__(
         self,
@@ -459,7 +459,7 @@ class CoupledPendulums:
         out = CoupledPendulums.__new__(CoupledPendulums)
         out.__dict__.update(self.__dict__)
         out.batch_size = int(index.size)
-        for name in STATE_ARRAYS:
+        for name in self.STATE_ARRAYS:
             setattr(out, name, getattr(self, name)[index].copy())
         return out
 

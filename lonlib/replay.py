@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from lonlib.pendulum import StepResult
+from lonlib.plain_state import StateLayoutError, TensorReader
 
 
 class ReplayBuffer:
@@ -45,6 +46,47 @@ class ReplayBuffer:
         out.data.copy_(self.data[torch.as_tensor(index, device=self.device)])
         out.position[:] = self.position[index]
         out.size[:] = self.size[index]
+        return out
+
+    def state_tensors(self) -> dict[str, torch.Tensor]:
+        """The buffer as CPU tensors: ``position`` and ``size`` ``[k]`` and ``rows``, each
+        slot's rows in use one slot after another (``[sum(size), width]``). Rows past a
+        slot's fill level are left from an earlier search and never read, so they are not
+        kept."""
+        rows = torch.cat([self.data[i, :n] for i, n in enumerate(self.size.tolist())])
+        return {
+            "position": torch.from_numpy(self.position.copy()),
+            "size": torch.from_numpy(self.size.copy()),
+            "rows": rows.cpu(),  # cat made it: its own storage
+        }
+
+    @classmethod
+    def from_state(
+        cls,
+        reader: TensorReader,
+        prefix: str,
+        agents: int,
+        capacity: int,
+        obs_size: int,
+        act_size: int,
+        device: torch.device,
+    ) -> ReplayBuffer:
+        """A buffer continuing from :meth:`state_tensors` (names after ``prefix``), every
+        tensor checked against this buffer's layout first (:class:`StateLayoutError`)."""
+        out = cls(agents, capacity, obs_size, act_size, device)
+        position = reader.take_numpy(f"{prefix}position", (agents,), torch.int64)
+        size = reader.take_numpy(f"{prefix}size", (agents,), torch.int64)
+        # A slot fills from row 0 after each clear, so below capacity it writes at its size.
+        wrong_size = (size < 0) | (size > capacity)
+        wrong_position = (position < 0) | (position >= capacity)
+        wrong_position |= (size < capacity) & (position != size)
+        if (wrong_size | wrong_position).any():
+            raise StateLayoutError(f"{prefix}: fill levels or positions outside the buffer")
+        width = out.data.shape[2]
+        rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32)
+        for i, part in enumerate(torch.split(rows, size.tolist())):
+            out.data[i, : size[i]] = part.to(out.device)
+        out.position[:], out.size[:] = position, size
         return out
 
     def add_step(

@@ -1,0 +1,513 @@
+"""In-flight checkpoints are data, not code: tensors read with weights_only=True and JSON,
+a format version, hostile or damaged files refused without running anything, and no tie to
+module paths or class names."""
+
+import io
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+import lonlib
+from lonlib.ddpg import SlotTrainer
+from lonlib.experiment import run_experiment
+from lonlib.inflight import (
+    FORMAT,
+    inflight_checkpoints,
+    load_inflight,
+    new_checkpoint_path,
+    save_inflight,
+)
+from lonlib.nets import actor_spec, critic_spec
+from tests.test_lockstep import CONFIG, SMALL, killed_after_checkpoints, serial, stored
+
+__all__ = ["serial"]  # the fixture, shared with tests/test_lockstep.py
+P = 1e-3
+TAGS = [(P, 0), (P, 1), (P, 2)]
+
+
+class Planted:
+    """Unpickling this creates ``path``: the callable a hostile checkpoint would carry."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def __reduce__(self):
+        return (open, (str(self.path), "w"))
+
+
+def mid_search_trainer() -> SlotTrainer:
+    """Three searches of one cart mid-way, one slot free since: greedy evaluations are
+    queued, environments carry start noise."""
+    rng = np.random.default_rng(0)
+    thetas = rng.uniform(-0.3, 0.3, (3, actor_spec(1).n_params))
+    omegas = rng.uniform(-0.3, 0.3, (3, critic_spec(1).n_params))
+    trainer = SlotTrainer(thetas, omegas, [5, 6, 7], CONFIG.env, CONFIG.ddpg, tags=TAGS)
+    trainer.judge_batch = 100  # evaluations stay queued: the checkpoint must carry them
+    for _ in range(125):
+        assert not trainer.step()
+    trainer.drop([1])  # as a restored batch drops a run that went on: a free slot
+    assert trainer.pending and list(trainer.busy) == [True, False, True]
+    return trainer
+
+
+def write_checkpoint(out: Path, trainer: SlotTrainer):
+    """``trainer`` saved as an in-flight checkpoint of experiment folder ``out``."""
+    (out / ".inflight").mkdir(parents=True, exist_ok=True)
+    path = new_checkpoint_path(out)
+    save_inflight(path, trainer, dict.fromkeys(TAGS, 0))
+    (checkpoint,) = inflight_checkpoints(out)
+    return checkpoint
+
+
+def finish(trainer: SlotTrainer) -> dict:
+    """Train to the end: every search's result, without its timings."""
+    ended = {}
+    while trainer.busy.any():
+        for tag, result in trainer.step():
+            ended[tag] = result
+    return {tag: comparable(result) for tag, result in ended.items()}
+
+
+def comparable(result) -> dict:
+    """A result's numbers (exact; NaN equal to NaN) without its timings."""
+    history = [{**vars(r), "seconds": 0.0} for r in result.history]
+    return {
+        "fitness": result.fitness,
+        "env_steps": result.env_steps,
+        "updates": result.updates,
+        "stop_reason": result.stop_reason,
+        "theta": result.theta.tobytes(),
+        "omega": result.omega.tobytes(),
+        "history": json.dumps(history),  # NaN == NaN as text
+    }
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """A checkpoint of a batch mid-search, the batch's uninterrupted results, and the
+    batch at its end."""
+    out = tmp_path_factory.mktemp("written")
+    trainer = mid_search_trainer()
+    checkpoint = write_checkpoint(out, trainer)
+    return checkpoint, finish(trainer), trainer
+
+
+def is_plain(value) -> bool:
+    """Only JSON's kinds: nothing that names a Python class."""
+    if isinstance(value, dict):
+        return all(isinstance(k, str) and is_plain(v) for k, v in value.items())
+    if isinstance(value, list):
+        return all(is_plain(v) for v in value)
+    return value is None or type(value) in (str, int, float, bool)
+
+
+# ------------------------------------------------------------------ data, not code
+
+
+def test_a_checkpoint_holds_only_tensors_and_plain_data(written):
+    checkpoint, _, _ = written
+    data = checkpoint.data_path.read_bytes()
+    payload = torch.load(io.BytesIO(data), weights_only=True)
+    assert set(payload) == {"format", "write_id", "tensors"} and payload["format"] == FORMAT
+    assert all(isinstance(t, torch.Tensor) for t in payload["tensors"].values())
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    assert meta["format"] == FORMAT and is_plain(meta)
+    assert b"lonlib" not in data and "lonlib" not in json.dumps(meta)  # no module is named
+
+
+def test_a_restored_batch_continues_bit_for_bit(written):
+    checkpoint, uninterrupted, original = written
+    restored = load_inflight(checkpoint)
+    assert restored.judge_batch == 100 and restored.pending and not restored.busy.all()
+    assert finish(restored) == uninterrupted
+    # Every attribute of the batch and its parts is restored: an attribute added to the
+    # trainer but not to its checkpoint makes the sets differ (bump FORMAT with the fix).
+    for name in ("", "learner", "replay", "streams", "sim"):
+        want = vars(original if not name else getattr(original, name))
+        got = vars(restored if not name else getattr(restored, name))
+        assert set(got) == set(want), name
+
+
+# The checkpoint layout of FORMAT 3. Changing what SlotTrainer.to_checkpoint writes means
+# checkpoints of running experiments stop being read: bump lonlib.inflight.FORMAT, then
+# write the new layout here.
+TENSORS = {
+    "learner.actor": ("float32", 2),
+    "learner.actor_exp_avg": ("float32", 2),
+    "learner.actor_exp_avg_sq": ("float32", 2),
+    "learner.actor_target": ("float32", 2),
+    "learner.adam_steps": ("int64", 1),
+    "learner.critic": ("float32", 2),
+    "learner.critic_exp_avg": ("float32", 2),
+    "learner.critic_exp_avg_sq": ("float32", 2),
+    "learner.critic_target": ("float32", 2),
+    "pending.omega": ("float32", 2),
+    "pending.theta": ("float32", 2),
+    "replay.position": ("int64", 1),
+    "replay.rows": ("float32", 2),
+    "replay.size": ("int64", 1),
+    "searches.best_omega": ("float32", 2),
+    "searches.best_theta": ("float32", 2),
+    "searches.history": ("float64", 2),
+    "searches.omega": ("float32", 2),
+    "searches.theta": ("float32", 2),
+    "sim.end_reason": ("int8", 1),
+    "sim.phi": ("float64", 2),
+    "sim.phi_dot": ("float64", 2),
+    "sim.step_count": ("int64", 1),
+    "sim.upright_sum": ("float64", 1),
+    "sim.x": ("float64", 2),
+    "sim.x_dot": ("float64", 2),
+    "slots.busy": ("bool", 1),
+    "slots.dirty": ("bool", 1),
+    "slots.episode_return": ("float64", 1),
+    "slots.episodes": ("int64", 1),
+    "slots.last_improvement": ("int64", 1),
+    "slots.loss_count": ("int64", 1),
+    "slots.loss_sum": ("float64", 2),
+    "slots.obs": ("float32", 2),
+    "slots.steps": ("int64", 1),
+    "slots.updates": ("int64", 1),
+}
+METADATA = ["clock", "data", "format", "runs", "saved", "steps", "trainer", "trials", "write_id"]
+TRAINER = [
+    "ddpg",
+    "env",
+    "history_columns",
+    "judge_batch",
+    "pending",
+    "searches",
+    "sim_generator",
+    "slots",
+    "stream_seeds",
+]
+SEARCH = [
+    "best",
+    "env_steps",
+    "episodes",
+    "final_evaluation",
+    "fitness",
+    "pending",
+    "seconds",
+    "start_fitness",
+    "started",
+    "stop_reason",
+    "tag",
+    "updates",
+]
+
+
+def test_the_checkpoint_layout_is_the_one_of_its_format(written):
+    checkpoint, _, _ = written
+    tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    search = next(s for s in meta["trainer"]["searches"] if s)
+    layout = {name: (str(t.dtype).removeprefix("torch."), t.ndim) for name, t in tensors.items()}
+    assert (FORMAT, layout, sorted(meta), sorted(meta["trainer"]), sorted(search)) == (
+        3,
+        TENSORS,
+        METADATA,
+        TRAINER,
+        SEARCH,
+    ), "the checkpoint layout changed: bump lonlib.inflight.FORMAT and write it down here"
+
+
+# ------------------------------------------------------------------ hostile files refused
+
+
+def rewrite(checkpoint, tensors=None, trainer=None, payload=None) -> None:
+    """Replace what ``checkpoint``'s files hold (same names and write id): its data file by
+    ``payload``, or by ``tensors`` in this format's envelope; its trainer's plain data."""
+    if tensors is not None:
+        payload = {"format": FORMAT, "write_id": checkpoint.write_id, "tensors": tensors}
+    if payload is not None:
+        torch.save(payload, checkpoint.data_path)
+    if trainer is not None:
+        meta = json.loads(checkpoint.metadata_path.read_text())
+        meta["trainer"] = trainer
+        checkpoint.metadata_path.write_text(json.dumps(meta))
+
+
+@pytest.fixture
+def copy_of(written, tmp_path):
+    """A fresh copy of the written checkpoint, its tensors and its trainer's plain data."""
+    checkpoint, _, _ = written
+    folder = tmp_path / ".inflight"
+    shutil.copytree(checkpoint.metadata_path.parent, folder)
+    (copy,) = inflight_checkpoints(tmp_path)
+    tensors = torch.load(copy.data_path, weights_only=True)["tensors"]
+    meta = json.loads(copy.metadata_path.read_text())
+    return copy, tensors, meta["trainer"]
+
+
+def test_a_pickled_callable_is_refused_and_never_runs(copy_of, tmp_path):
+    checkpoint, tensors, _ = copy_of
+    marker = tmp_path / "planted-code-ran"
+    rewrite(checkpoint, tensors={**tensors, "learner.actor": Planted(marker)})
+    torch.load(checkpoint.data_path, weights_only=False)  # the payload is live...
+    assert marker.exists()
+    marker.unlink()
+    with pytest.raises(ValueError, match="refused, not tensors.*io.open.*nothing in it was run"):
+        load_inflight(checkpoint)  # ...and resuming does not run it
+    assert not marker.exists()
+
+
+def test_a_truncated_data_file_is_refused(copy_of):
+    checkpoint, _, _ = copy_of
+    data = checkpoint.data_path.read_bytes()
+    for size in (0, 100, len(data) // 3, len(data) - 30):
+        checkpoint.data_path.write_bytes(data[:size])
+        with pytest.raises(ValueError, match="refused, not tensors and plain data"):
+            load_inflight(checkpoint)
+
+
+def test_a_truncated_metadata_file_is_refused(copy_of):
+    checkpoint, _, _ = copy_of
+    text = checkpoint.metadata_path.read_text()
+    checkpoint.metadata_path.write_text(text[: len(text) - 40])
+    with pytest.raises(ValueError, match="refused"):
+        load_inflight(checkpoint)
+
+
+def drop(mapping: dict, key: str) -> dict:
+    return {k: v for k, v in mapping.items() if k != key}
+
+
+def with_search(trainer: dict, **changes) -> dict:
+    searches = list(trainer["searches"])
+    slot = next(i for i, s in enumerate(searches) if s)
+    searches[slot] = {**searches[slot], **changes}
+    return {**trainer, "searches": searches}
+
+
+def shaped(tensors: dict, name: str, value) -> dict:
+    return {**tensors, name: value}
+
+
+TENSOR_CASES = {
+    "missing tensor": (lambda t: drop(t, "replay.rows"), "'replay.rows' is missing"),
+    "extra tensor": (lambda t: shaped(t, "x", torch.zeros(1)), r"unexpected tensors \['x'\]"),
+    "wrong shape": (
+        lambda t: shaped(t, "learner.actor", t["learner.actor"][:, :-1]),
+        "'learner.actor' is torch.float32 .*, expected torch.float32",
+    ),
+    "wrong dtype": (
+        lambda t: shaped(t, "sim.x", t["sim.x"].float()),
+        "'sim.x' is torch.float32 .*, expected torch.float64",
+    ),
+    "not a tensor": (lambda t: shaped(t, "slots.busy", [1, 2]), "'slots.busy' is not a dense"),
+    "fill level past the buffer": (
+        lambda t: shaped(t, "replay.size", t["replay.size"] + 10_000),
+        "fill levels or positions outside the buffer",
+    ),
+    "a busy slot without a search": (
+        lambda t: shaped(t, "slots.busy", torch.ones_like(t["slots.busy"])),
+        "the busy slots are not the slots with a search",
+    ),
+    "a fraction in an episode count": (
+        lambda t: shaped(t, "searches.history", t["searches.history"] + 0.5),
+        "an integer column holds a fraction",
+    ),
+    "history of other length": (
+        lambda t: shaped(t, "searches.history", t["searches.history"][:-1]),
+        "'searches.history' is",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", TENSOR_CASES)
+def test_tensors_of_a_wrong_layout_are_refused(copy_of, case):
+    checkpoint, tensors, _ = copy_of
+    change, message = TENSOR_CASES[case]
+    rewrite(checkpoint, tensors=change(tensors))
+    with pytest.raises(ValueError, match=message):
+        load_inflight(checkpoint)
+
+
+PLAIN_CASES = {
+    "missing key": (lambda p: drop(p, "stream_seeds"), r"missing keys \['stream_seeds'\]"),
+    "slots as text": (lambda p: {**p, "slots": "3"}, "trainer.slots must be an integer"),
+    "a search's steps as text": (
+        lambda p: with_search(p, env_steps="70"),
+        r"trainer.searches\[\d\].env_steps must be an integer",
+    ),
+    "a search's best as a number": (
+        lambda p: with_search(p, best=0.5),
+        r"trainer.searches\[\d\].best must be a list",
+    ),
+    "a tag as a mapping": (
+        lambda p: with_search(p, tag={"p": 0.001}),
+        r"trainer.searches\[\d\].tag must be plain data",
+    ),
+    "a queued evaluation of an empty slot": (
+        lambda p: {**p, "pending": [[p["searches"].index(None), 0], *p["pending"][1:]]},
+        "holds no search",
+    ),
+    "a queued count that is not the queue's": (
+        lambda p: with_search(p, pending=99),
+        "not its queued count",
+    ),
+    "a negative stream seed": (
+        lambda p: {**p, "stream_seeds": [-1] * p["slots"]},
+        "seed must be an integer in",
+    ),
+    "other DDPG settings keys": (
+        lambda p: {**p, "ddpg": {**p["ddpg"], "surprise": 1}},
+        r"unexpected keys \['surprise'\]",
+    ),
+    "invalid DDPG settings": (
+        lambda p: {**p, "ddpg": {**p["ddpg"], "batch_size": -8}},
+        "trainer.ddpg: batch_size must be",
+    ),
+    "a generator of another kind": (
+        lambda p: {**p, "sim_generator": {"bit_generator": "MT19937"}},
+        "state of a PCG64 generator",
+    ),
+    "episode records of other fields": (
+        lambda p: {**p, "history_columns": p["history_columns"][:-1]},
+        "trainer.history_columns",
+    ),
+    "not a mapping": (lambda p: [p], "trainer must be a mapping"),
+}
+
+
+@pytest.mark.parametrize("case", PLAIN_CASES)
+def test_plain_data_of_a_wrong_layout_is_refused(copy_of, case):
+    checkpoint, _, plain = copy_of
+    change, message = PLAIN_CASES[case]
+    rewrite(checkpoint, trainer=change(plain))
+    with pytest.raises(ValueError, match=message):
+        load_inflight(checkpoint)
+
+
+def test_a_data_file_of_another_write_is_refused(copy_of):
+    checkpoint, tensors, _ = copy_of
+    rewrite(checkpoint, payload={"format": FORMAT, "write_id": "other", "tensors": tensors})
+    with pytest.raises(ValueError, match="not the data file its metadata describes"):
+        load_inflight(checkpoint)
+
+
+def test_metadata_naming_another_data_file_is_not_listed(copy_of, tmp_path, caplog):
+    checkpoint, _, _ = copy_of
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    meta["data"] = "../../elsewhere.pt"
+    checkpoint.metadata_path.write_text(json.dumps(meta))
+    assert inflight_checkpoints(tmp_path) == []
+    assert "its data file must be" in caplog.text
+
+
+def test_a_planted_checkpoint_is_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog
+):
+    """The whole resume path: a checkpoint of this format whose data file carries a
+    callable is reported and removed; its runs continue from their stored trials."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
+    marker = tmp_path / "planted-code-ran"
+    rewrite(checkpoint, tensors={**tensors, "replay.rows": Planted(marker)})
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert not marker.exists()
+    assert "stale in-flight checkpoint removed" in caplog.text and "io.open" in caplog.text
+    assert "resumed" not in caplog.text
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert not list((tmp_path / ".inflight").iterdir())
+
+
+# ------------------------------------------------------------------ a format version
+
+
+@pytest.mark.parametrize("version", [2, 4])
+def test_a_checkpoint_of_another_format_is_refused_saying_what_to_do(
+    serial, tmp_path, monkeypatch, caplog, version
+):
+    """Format 2 is what lonlib wrote before: a pickle of the trainer. Planted as one (its
+    data file a callable), it is never read; the experiment ends as an uninterrupted one."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    marker = tmp_path / "planted-code-ran"
+    payload = {"format": version, "layout": "a20ab573a108", "write_id": checkpoint.write_id}
+    rewrite(checkpoint, payload={**payload, "clock": 0.0, "trainer": Planted(marker)})
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    meta = {key: meta[key] for key in ("write_id", "data", "saved", "runs", "trials", "steps")}
+    checkpoint.metadata_path.write_text(json.dumps({**meta, "format": version}))
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert not marker.exists()
+    (message,) = [r.getMessage() for r in caplog.records if "of format" in r.getMessage()]
+    assert f"in-flight checkpoint of format {version}" in message
+    assert "continue from their stored trials, losing at most the minutes" in message
+    assert "Delete" in message and "silence" in message
+    assert "resumed" not in caplog.text and "Traceback" not in caplog.text
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert checkpoint.metadata_path.exists()  # left for the user to delete
+
+
+# ------------------------------------------------------------------ no module paths
+
+
+MOVED = """
+import json, sys
+from lonlib.inflight import inflight_checkpoints, load_inflight
+import lonlib
+assert lonlib.__file__.startswith(sys.argv[2]), lonlib.__file__
+assert "lonlib.ddpg" not in sys.modules and "lonlib.trainers_moved" in sys.modules
+(checkpoint,) = inflight_checkpoints(sys.argv[1])
+trainer = load_inflight(checkpoint)
+assert type(trainer).__name__ == "RenamedTrainer"
+ended = {}
+while trainer.busy.any():
+    for tag, result in trainer.step():
+        ended[str(tag)] = {"fitness": result.fitness, "env_steps": result.env_steps,
+                           "theta": result.theta.tobytes().hex()}
+print(json.dumps(ended))
+"""
+
+
+def test_a_checkpoint_resumes_in_a_package_whose_trainer_moved_and_was_renamed(written, tmp_path):
+    """The checkpoint names no module or class: a copy of lonlib with the trainer's module
+    renamed (lonlib.ddpg -> lonlib.trainers_moved) and its class too (SlotTrainer ->
+    RenamedTrainer) resumes it, in a process that never imports the original package."""
+    checkpoint, uninterrupted, _ = written
+    package = Path(lonlib.__file__).parent
+    copy = tmp_path / "moved" / "lonlib"
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / "ddpg.py").rename(copy / "trainers_moved.py")
+    for path in copy.glob("*.py"):
+        text = re.sub(r"\blonlib\.ddpg\b", "lonlib.trainers_moved", path.read_text())
+        path.write_text(text.replace("SlotTrainer", "RenamedTrainer"))
+    script = tmp_path / "resume.py"
+    script.write_text(MOVED)
+    env = {**os.environ, "PYTHONPATH": str(copy.parent)}
+    folder = checkpoint.metadata_path.parent.parent
+    done = subprocess.run(
+        [sys.executable, str(script), str(folder), str(copy)],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    got = json.loads(done.stdout)
+    want = {
+        str(tag): {
+            "fitness": r["fitness"],
+            "env_steps": r["env_steps"],
+            "theta": r["theta"].hex(),
+        }
+        for tag, r in uninterrupted.items()
+    }
+    assert got == want
