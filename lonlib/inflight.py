@@ -229,7 +229,7 @@ class StoredBatch:
         first misfit) if anything in it does not fit a batch of its settings."""
         try:
             trainer = SlotTrainer.from_checkpoint(self.plain, self.tensors, device)
-        except (StateLayoutError, TypeError, KeyError, IndexError, RuntimeError) as error:
+        except (ValueError, TypeError, KeyError, IndexError, RuntimeError) as error:
             raise ValueError(f"{self.source}: refused, {error}") from None
         trainer.resume_clocks(time.perf_counter() - self.clock)
         return trainer

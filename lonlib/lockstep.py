@@ -340,12 +340,12 @@ def _restore(
         try:
             stored = read_inflight(checkpoint)
             env_config, hp = stored.settings()
-            if hp == config.ddpg and env_config == config.env:
-                trainer = stored.trainer()
+            same = hp == config.ddpg and env_config == config.env
+            trainer = stored.trainer() if same else None
         except ValueError as error:  # truncated, planted, or not of this layout
             stale = str(error)
             return None
-        if hp != config.ddpg or env_config != config.env:
+        if trainer is None:
             log.warning(
                 "%s: in-flight checkpoint trained with device=%r, threads=%d: resume with those "
                 "to continue it; its runs restart from their stored trials",

@@ -14,6 +14,11 @@ from lonlib.pendulum import StepResult
 from lonlib.plain_state import StateLayoutError, TensorReader
 
 
+def row_width(obs_size: int, act_size: int) -> int:
+    """Floats per stored transition ``(s, a, r, s', 1 - terminated)``."""
+    return 2 * obs_size + act_size + 2
+
+
 class ReplayBuffer:
     """``k`` ring buffers of transitions in one torch tensor ``[k, capacity, width]``."""
 
@@ -21,7 +26,7 @@ class ReplayBuffer:
         self, agents: int, capacity: int, obs_size: int, act_size: int, device: torch.device
     ) -> None:
         self.obs_size, self.act_size = obs_size, act_size
-        width = 2 * obs_size + act_size + 2
+        width = row_width(obs_size, act_size)
         self.data = torch.zeros(agents, capacity, width, device=device)
         self.capacity = capacity
         self.device = torch.device(device)
@@ -73,7 +78,6 @@ class ReplayBuffer:
     ) -> ReplayBuffer:
         """A buffer continuing from :meth:`state_tensors` (names after ``prefix``), every
         tensor checked against this buffer's layout first (:class:`StateLayoutError`)."""
-        out = cls(agents, capacity, obs_size, act_size, device)
         position = reader.take_numpy(f"{prefix}position", (agents,), torch.int64)
         size = reader.take_numpy(f"{prefix}size", (agents,), torch.int64)
         # A slot fills from row 0 after each clear, so below capacity it writes at its size.
@@ -82,8 +86,9 @@ class ReplayBuffer:
         wrong_position |= (size < capacity) & (position != size)
         if (wrong_size | wrong_position).any():
             raise StateLayoutError(f"{prefix}: fill levels or positions outside the buffer")
-        width = out.data.shape[2]
+        width = row_width(obs_size, act_size)
         rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32)
+        out = cls(agents, capacity, obs_size, act_size, device)  # allocated once all fit
         for i, part in enumerate(torch.split(rows, size.tolist())):
             out.data[i, : size[i]] = part.to(out.device)
         out.position[:], out.size[:] = position, size

@@ -203,8 +203,8 @@ MUTANTS = [
     ),
     Mutant(
         LOCKSTEP,
-        "if trainer.hp != config.ddpg or trainer.env_config != config.env:",
-        "if trainer.env_config != config.env:",
+        "same = hp == config.ddpg and env_config == config.env",
+        "same = env_config == config.env",
         "a batch trained with other threads or device is resumed",
     ),
     # --- DDPG: what F returns
