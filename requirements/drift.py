@@ -8,24 +8,17 @@ whose installed version differs, and packages installed here that the lock does 
 from __future__ import annotations
 
 import sys
-from importlib import metadata
 from pathlib import Path
 
-from environment_yml import pins
+from lonlib.provenance import installed_versions, lock_pins
 
 NOT_LOCKED = {"torch", "lonlib", "pip"}
 
 
-def normalise(name: str) -> str:
-    """A distribution name as the lock writes it (PEP 503)."""
-    return name.lower().replace("_", "-").replace(".", "-")
-
-
 def drift(lock: Path) -> list[str]:
     """One line per difference between the lock and the installed distributions."""
-    locked = dict(pin.split("==") for pin in pins(lock.read_text()))
-    locked = {normalise(name): version for name, version in locked.items()}
-    installed = {normalise(d.metadata["Name"]): d.version for d in metadata.distributions()}
+    locked = lock_pins(lock.read_text())
+    installed = installed_versions()
     lines = [
         f"  {name}: {version} in the lock, {installed.get(name, 'not installed')} here"
         for name, version in sorted(locked.items())

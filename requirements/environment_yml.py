@@ -9,11 +9,10 @@ the lock's exact versions without its hashes. Usage::
 
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
-PIN = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*)==([^\s;\\]+)")
+from lonlib.provenance import lock_pins
 
 HEADER = """\
 # Conda environment for lonlib (outside users; the Makefile uses python -m venv + pip).
@@ -33,15 +32,11 @@ dependencies:
 """
 
 
-def pins(lock: str) -> list[str]:
-    """The ``name==version`` lines of a pip requirements lock, in file order."""
-    return [f"{m[1]}=={m[2]}" for line in lock.splitlines() if (m := PIN.match(line))]
-
-
 def environment_yml(lock_path: Path, torch: str, extras: str = "dev") -> str:
     """The text of ``environment.yml`` for the lock at ``lock_path``."""
     lines = [HEADER.format(lock=lock_path.as_posix(), torch=torch)]
-    lines += [f"      - {pin}\n" for pin in pins(lock_path.read_text())]
+    pins = lock_pins(lock_path.read_text())
+    lines += [f"      - {name}=={version}\n" for name, version in pins.items()]
     lines.append(f"      - -e .[{extras}]\n")
     return "".join(lines)
 
