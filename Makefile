@@ -79,8 +79,10 @@ $(STAMP): $(REQ)/dev.txt pyproject.toml | $(BIN)/python
 
 setup: $(STAMP)
 
+# In TEST_JOBS processes, then the timing-sensitive tests (marker `serial`) alone.
 test: setup $(if $(BROWSER_TEST),$(VENV)/.lab-installed)
-	$(BIN)/python -m pytest -q -n $(TEST_JOBS)
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) -m "not serial"
+	$(BIN)/python -m pytest -q -m serial
 
 # Upstream drift, seen before it reaches a user: a fresh venv with the newest versions
 # pyproject.toml allows (torch as in setup), the same tests. Not part of `make test` or CI.
@@ -91,8 +93,9 @@ test-latest:
 	$(LATEST)/bin/python -m pip install --quiet $(TORCH)
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
 	  -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
-	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/dev.txt
-	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider
+	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
+	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
+	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
 
 UV_COMPILE = $(BIN)/uv pip compile pyproject.toml --quiet --generate-hashes \
   --python-version 3.11 --python-platform x86_64-manylinux_2_28 \
@@ -100,7 +103,7 @@ UV_COMPILE = $(BIN)/uv pip compile pyproject.toml --quiet --generate-hashes \
   --custom-compile-command "make lock"
 
 # One resolution of every extra (all.txt), then each install's lock as its projection.
-lock: | $(BIN)/python
+lock: setup
 	$(BIN)/python -m pip install --quiet $(UV)
 	$(UV_COMPILE) $(LOCK_UPGRADE) --all-extras -o $(REQ)/all.txt
 	$(UV_COMPILE) -c $(REQ)/all.txt -o $(REQ)/base.txt
