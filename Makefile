@@ -4,6 +4,19 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 TORCH  := torch==2.13.0
+PIP    := pip==26.3
+UV     := uv==0.13.9
+# The lock (README, "Environment, lock and reproducibility"): exact versions with hashes, one
+# file per install (base; base + dev; + lab; + bench), all projections of one resolution
+# (requirements/all.txt; a docs extra gets its line in `lock`). torch stays out of it:
+# installed first, the CPU build.
+REQ    := requirements
+LOCK_FILES := $(foreach lock,all base dev lab bench,$(REQ)/$(lock).txt)
+# Where uv finds torch's CPU wheel when resolving its dependencies (pip's find-links here).
+TORCH_FIND_LINKS ?= $(or $(PIP_FIND_LINKS),https://download.pytorch.org/whl/cpu/torch/)
+LOCK_UPGRADE ?= --upgrade
+TEST_JOBS ?= 2
+LATEST ?= .venv-latest
 
 CONFIG    ?= quick
 WORKERS   ?= 2
@@ -17,14 +30,21 @@ EXPERIMENT ?= data/reference
 PAPERMILL := $(BIN)/python -m lonlib.notebook_run --log-level WARNING --no-progress-bar
 # The browser test runs in `make test` when Chromium and chromedriver are installed.
 CHROMIUM  := $(shell for b in chromium chromium-browser google-chrome; do command -v $$b && break; done)
+comma := ,
 BROWSER_TEST := $(if $(and $(CHROMIUM),$(shell command -v chromedriver 2>/dev/null)),yes)
 
-.PHONY: help setup test test-browser bench lab lint format clean reproduce figures mutants
+.PHONY: help setup test test-browser test-latest lock bench lab lint format clean reproduce \
+	figures mutants
 
 help:
-	@echo "make setup   create $(VENV) and install lonlib with its dev extra (idempotent)"
-	@echo "make test    set up, then run the test suite (with the browser test when Chromium"
-	@echo "             and chromedriver are installed: apt-get install chromium chromium-driver)"
+	@echo "make setup   create $(VENV) and install the lock $(REQ)/dev.txt + lonlib (idempotent)"
+	@echo "make test    set up, then run the test suite ($(TEST_JOBS) processes; with the browser test"
+	@echo "             when Chromium and chromedriver are installed: apt-get install chromium"
+	@echo "             chromium-driver)"
+	@echo "make test-latest  the tests in $(LATEST): the newest versions pyproject.toml allows"
+	@echo "             (run it before make lock; never part of make test or CI)"
+	@echo "make lock    resolve pyproject.toml's ranges again into $(REQ)/*.txt (newest versions;"
+	@echo "             LOCK_UPGRADE= keeps the current pins where they still fit) and environment.yml"
 	@echo "make test-browser  JupyterLab driven in headless Chromium (tests/test_browser.py)"
 	@echo "make bench   set up, then run the benchmarks (writes benchmarks/results/*.json)"
 	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
@@ -35,23 +55,63 @@ help:
 	@echo "make lab     set up, then start JupyterLab on the project (opens at notebooks/)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check"
-	@echo "make clean   remove $(VENV) and caches (never data/)"
+	@echo "make clean   remove $(VENV), $(LATEST) and caches (never data/)"
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet $(PIP)
 
-# Reinstall only when the dependency list changes; a second `make setup` takes seconds.
-$(STAMP): pyproject.toml | $(BIN)/python
+# Install a lock: every package at its locked version and hash, nothing resolved (the lock is
+# complete; --no-deps also keeps stable-baselines3's torch requirement from being resolved),
+# then check that every installed package's requirements hold.
+define install_lock
+	$(1)/bin/python -m pip install --quiet --no-deps --require-hashes -r $(2)
+	$(1)/bin/python -m pip check >$(1)/pip-check.txt || { cat $(1)/pip-check.txt; exit 1; }
+endef
+
+# Reinstall only when the lock changes; a second `make setup` takes seconds.
+$(STAMP): $(REQ)/dev.txt pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	$(call install_lock,$(VENV),$(REQ)/dev.txt)
+	$(BIN)/python -m pip install --quiet --no-deps -e .
 	$(BIN)/rerun analytics disable >/dev/null 2>&1 || true
 	touch $(STAMP)
 
 setup: $(STAMP)
 
+# In TEST_JOBS processes, then the timing-sensitive tests (marker `serial`) alone.
 test: setup $(if $(BROWSER_TEST),$(VENV)/.lab-installed)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) -m "not serial"
+	$(BIN)/python -m pytest -q -m serial
+
+# Upstream drift, seen before it reaches a user: a fresh venv with the newest versions
+# pyproject.toml allows (torch as in setup), the same tests. Not part of `make test` or CI.
+test-latest:
+	rm -rf $(LATEST)
+	$(PYTHON) -m venv $(LATEST)
+	$(LATEST)/bin/python -m pip install --quiet --upgrade pip
+	$(LATEST)/bin/python -m pip install --quiet $(TORCH)
+	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
+	  -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
+	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
+	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
+	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
+
+UV_COMPILE = $(BIN)/uv pip compile pyproject.toml --quiet --generate-hashes \
+  --python-version 3.11 --python-platform x86_64-manylinux_2_28 \
+  --find-links $(TORCH_FIND_LINKS) -c $(REQ)/torch-cpu.txt --no-emit-package torch \
+  --custom-compile-command "make lock"
+
+# One resolution of every extra (all.txt), then each install's lock as its projection.
+lock: setup
+	$(BIN)/python -m pip install --quiet $(UV)
+	$(UV_COMPILE) $(LOCK_UPGRADE) --all-extras -o $(REQ)/all.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt -o $(REQ)/base.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev -o $(REQ)/dev.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra lab -o $(REQ)/lab.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra bench -o $(REQ)/bench.txt
+	$(BIN)/python $(REQ)/environment_yml.py $(REQ)/dev.txt $(TORCH) > environment.yml
+	@! grep -iE '^(torch|triton|nvidia-)' $(LOCK_FILES) || { echo "torch/CUDA in the lock"; exit 1; }
 
 mutants: setup
 	$(BIN)/python tests/mutants.py --jobs $(or $(JOBS),2)
@@ -67,15 +127,15 @@ format: setup
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
-$(VENV)/.bench-installed: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
+$(VENV)/.bench-installed: $(STAMP) $(REQ)/bench.txt
+	$(call install_lock,$(VENV),$(REQ)/bench.txt)
 	touch $@
 
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks
 
-$(VENV)/.lab-installed: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[dev,lab]"
+$(VENV)/.lab-installed: $(STAMP) $(REQ)/lab.txt
+	$(call install_lock,$(VENV),$(REQ)/lab.txt)
 	touch $@
 
 # The whole project in the file browser (data/ beside notebooks/), opened at notebooks/.
@@ -113,5 +173,5 @@ figures: setup
 	$(BIN)/lonlib analyse $(EXPERIMENT)
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache build *.egg-info
+	rm -rf $(VENV) $(LATEST) .pytest_cache .ruff_cache build *.egg-info
 	find . -name __pycache__ -type d -not -path './data/*' -prune -exec rm -rf {} +

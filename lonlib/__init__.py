@@ -5,11 +5,17 @@ controllers (:mod:`lonlib.controllers`), DDPG as the local search and parameter-
 hopping as the global search, and the LON analysis built on what they sample.
 """
 
-import gymnasium as _gym
+# First, before anything here imports torch: torch's AVX2 CPU kernels on every x86-64 machine
+# (lonlib.cpu_kernels: the same trials bit for bit on any CPU with AVX2).
+from lonlib.cpu_kernels import pin_torch_cpu_kernels as _pin
 
-from lonlib.env import ENV_ID
-from lonlib.pendulum import CoupledPendulums, EndReason, PendulumConfig
-from lonlib.rollout import Rollout, evaluate
+_pin()
+
+import gymnasium as _gym  # noqa: E402
+
+from lonlib.env import ENV_ID  # noqa: E402
+from lonlib.pendulum import CoupledPendulums, EndReason, PendulumConfig  # noqa: E402
+from lonlib.rollout import Rollout, evaluate  # noqa: E402
 
 Evaluation = Rollout  # the name ``evaluate`` returned before the one rollout
 

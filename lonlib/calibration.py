@@ -46,13 +46,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from lonlib import portable_math
 from lonlib.behaviour import describe_actors, label
 from lonlib.ddpg import DDPGConfig, local_search_batch
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.pendulum import PendulumConfig, total_energy, wrap_angle
+from lonlib.progress import progress_bar
 from lonlib.rollout import Scoring, run_policy
 from lonlib.store import atomic_write, read_json, write_json
 from lonlib.validation import (
@@ -555,7 +555,7 @@ def run_calibration(
         out / "calibration.json",
         {"config": config.to_dict(), "updated": datetime.now(UTC).isoformat(timespec="seconds")},
     )
-    bar = tqdm(
+    bar = progress_bar(
         total=len(config.cells),
         initial=len(config.cells) - len(todo),
         desc=f"calibration {config.name}",

@@ -44,7 +44,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from lonlib.ddpg_update import LEARNERS, learner_class
 from lonlib.nets import NetSpec, actor_spec, critic_spec
@@ -62,6 +61,7 @@ from lonlib.plain_state import (
     plain_list,
     plain_str,
 )
+from lonlib.progress import progress_bar
 from lonlib.random_streams import (
     EXPLORATION_NOISE,
     REPLAY_SAMPLES,
@@ -252,7 +252,9 @@ def local_search_batch(
     """
     trainer = SlotTrainer(thetas, omegas, seeds, env_config, hp)
     results: list[LocalSearchResult | None] = [None] * len(seeds)
-    bar = tqdm(total=hp.max_steps, desc=f"DDPG x{len(seeds)}", disable=not progress, leave=False)
+    bar = progress_bar(
+        total=hp.max_steps, desc=f"DDPG x{len(seeds)}", disable=not progress, leave=False
+    )
     while trainer.busy.any():
         for tag, result in trainer.step():
             results[tag] = result

@@ -17,6 +17,7 @@ import dataclasses
 import errno
 import logging
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from functools import partial
@@ -40,15 +41,23 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
     load_config,
     named_config,
 )
+from lonlib.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
 from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints, remove_inflight
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep
 from lonlib.lockstep_workers import run_lockstep_processes
-from lonlib.manifest import manifest_path, updated_manifest
+from lonlib.manifest import (
+    capability_change,
+    manifest_path,
+    sessions_with_other_result_path,
+    updated_manifest,
+)
 from lonlib.nets import actor_spec, critic_spec
 from lonlib.progress import progress_bar
+from lonlib.provenance import session_provenance
+from lonlib.result_path import RESULT_PATH_VERSION
 from lonlib.store import (
     DataWriteError,
     check_output_folder,
@@ -179,6 +188,22 @@ def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> Non
                 remove_inflight(checkpoint.metadata_path)
 
 
+def refuse_mixed_result_paths(out: Path) -> None:
+    """Refuse to sample more into an experiment whose stored sessions ran another
+    result-path version (:mod:`lonlib.result_path`): no experiment mixes two versions of a
+    result-changing path. Analysing it (``lonlib analyse``, ``lonlib verify``) still works."""
+    others = sessions_with_other_result_path(out)
+    if others:
+        found = sorted({str(s["result_path_version"]) for s in others})
+        raise ValueError(
+            f"{out} was sampled by result-path version(s) {found} ('None': before versions "
+            f"were recorded) and this lonlib computes version {RESULT_PATH_VERSION}: its "
+            "runs cannot be continued or extended without mixing two versions of the results. "
+            "Analyse it as it is (lonlib analyse / lonlib verify), or sample the experiment "
+            "again into a new folder (--out)"
+        )
+
+
 def run_experiment(
     config: ExperimentConfig,
     out: str | Path,
@@ -224,13 +249,18 @@ def run_experiment(
         check_lockstep(config.ddpg, slots)
     out = Path(out)
     check_output_folder(out)
+    capability = torch_cpu_capability()
     with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
         remove_temporary_files(out, manifest_path(out).name)
-        manifest = updated_manifest(config, out)
+        manifest = updated_manifest(config, out, session_provenance(capability))
         todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
+        if todo and manifest_path(out).exists():
+            refuse_mixed_result_paths(out)
         remove_finished_checkpoints(out, todo)
         if todo or not manifest_path(out).exists():  # a finished experiment stays untouched
             write_json(manifest_path(out), manifest)
+    if todo and config.ddpg.device == "cpu":
+        warn_about_cpu_kernels(manifest, capability)
     total = len(config.perturbations) * config.runs
     bar = progress_bar(
         total=total,
@@ -287,6 +317,15 @@ def run_experiment(
     finally:
         bar.close()
     return read_experiment_trials(out)
+
+
+def warn_about_cpu_kernels(manifest: dict[str, Any], capability: str) -> None:
+    """Warn (:class:`lonlib.cpu_kernels.CpuKernelWarning`, and in the log) when this
+    session's torch CPU kernels are not the ones lonlib pins, or not its earlier sessions'."""
+    for message in (unpinned_message(capability), capability_change(manifest, capability)):
+        if message:
+            log.warning(message)
+            warnings.warn(message, CpuKernelWarning, stacklevel=3)
 
 
 def check_worker_sees_folder(out: str) -> None:

@@ -2,20 +2,95 @@
 
 The same arguments as ``papermill`` with two differences in how the kernel runs:
 
-* its connection is encrypted (CurveZMQ keys provisioned by jupyter_client, which the
-  standard ``python3`` kernelspec declares it supports), so the kernel does not warn
-  "Kernel is running over TCP without encryption" in the terminal;
+* its connection is encrypted (CurveZMQ keys provisioned by jupyter_client), so ipykernel
+  (7.3 and later) does not warn "Kernel is running over TCP without encryption" in the
+  terminal. jupyter_client provisions keys (``transport_encryption = "auto"``) only when the
+  kernelspec *file* it finds declares ``supported_encryption``; a ``python3`` kernelspec
+  written by an older ipykernel (in ``~/.local/share/jupyter``, on ``JUPYTER_PATH``, in a
+  conda environment) does not, although the kernel that runs is this interpreter's ipykernel.
+  :class:`EncryptedKernelManager` therefore asks that ipykernel instead of the file;
 * its stderr (progress bars, warnings) is copied to this process's stderr as it arrives,
   so a long sampling notebook shows its progress in the terminal (``--stderr-file`` still
   chooses another file).
+
+The engine is also registered with papermill as ``lonlib`` (an entry point), so
+``papermill.execute_notebook(..., engine_name="lonlib")`` runs notebooks the same way.
 """
 
 from __future__ import annotations
 
 import sys
+from typing import Any
 
+import zmq
+from jupyter_client import AsyncKernelManager, KernelManager
+from jupyter_client.kernelspec import KernelSpec
 from papermill.engines import NBClientEngine, papermill_engines
 from traitlets.config import Config
+
+
+def declares_curve(metadata: dict[str, Any] | None) -> bool:
+    """Whether kernelspec ``metadata`` declares CurveZMQ support (a string or a list, as
+    ipykernel 7.3 and 7.4 write it)."""
+    declared = (metadata or {}).get("supported_encryption")
+    if isinstance(declared, str):
+        return declared.strip().lower() == "curve"
+    if isinstance(declared, (list, tuple, set)):
+        return "curve" in {str(item).strip().lower() for item in declared}
+    return False
+
+
+def runs_this_ipykernel(argv: list[str]) -> bool:
+    """Whether a kernelspec's command starts this interpreter's ipykernel (jupyter_client
+    runs ``python``, ``python3`` and ``python3.X`` as ``sys.executable``)."""
+    major, minor = sys.version_info[:2]
+    pythons = {"python", f"python{major}", f"python{major}.{minor}"}
+    if not argv or argv[0] not in {*pythons, sys.executable}:
+        return False
+    return any(
+        flag == "-m" and module in {"ipykernel", "ipykernel_launcher"}
+        for flag, module in zip(argv, argv[1:], strict=False)
+    )
+
+
+def this_ipykernel_supports_curve() -> bool:
+    """Whether the ipykernel installed here accepts manager-provisioned CurveZMQ keys (it
+    says so in the kernelspec it writes) and pyzmq can encrypt."""
+    try:
+        from ipykernel.kernelspec import get_kernel_dict
+    except ImportError:
+        return False
+    return zmq.has("curve") and declares_curve(get_kernel_dict().get("metadata"))
+
+
+class EncryptedKernelManager(AsyncKernelManager):
+    """nbclient's kernel manager, whose kernelspec declares CurveZMQ support whenever the
+    kernel it starts is this interpreter's ipykernel and that ipykernel supports it,
+    whatever kernelspec file jupyter_client found."""
+
+    @property
+    def kernel_spec(self) -> KernelSpec | None:
+        """The kernelspec jupyter_client found, with ``supported_encryption`` added when
+        the kernel is this interpreter's curve-capable ipykernel."""
+        spec = super().kernel_spec
+        if (
+            spec is not None
+            and not declares_curve(spec.metadata)
+            and runs_this_ipykernel(list(spec.argv))
+            and this_ipykernel_supports_curve()
+        ):
+            spec.metadata = {**spec.metadata, "supported_encryption": ["curve"]}
+        return spec
+
+
+def encrypted_kernel_config(config: Config | None = None) -> Config:
+    """``config`` (or a new one) with the kernel connection encrypted where this
+    jupyter_client and pyzmq can do it; unchanged settings otherwise."""
+    config = config or Config()
+    if "transport_encryption" in KernelManager.class_trait_names() and zmq.has("curve"):
+        config.KernelManager.transport_encryption = "auto"
+        config.NotebookClient.kernel_manager_class = EncryptedKernelManager
+    return config
 
 
 class TerminalEngine(NBClientEngine):
@@ -27,8 +102,7 @@ class TerminalEngine(NBClientEngine):
         """Run the notebook as :class:`NBClientEngine` does, with this engine's defaults."""
         if kwargs.get("stderr_file") is None:
             kwargs["stderr_file"] = sys.stderr
-        config = kwargs.pop("config", None) or Config()
-        config.KernelManager.transport_encryption = "auto"
+        config = encrypted_kernel_config(kwargs.pop("config", None))
         return super().execute_managed_notebook(nb_man, kernel_name, config=config, **kwargs)
 
 

@@ -4,6 +4,8 @@ from pathlib import Path
 
 import pytest
 
+import lonlib  # noqa: F401  (first: it pins torch's CPU kernels before any test uses torch)
+
 # One cart, 40-step episodes, a "swing high" fitness (upright within 2.9 rad of the top),
 # and a DDPG budget of 150 steps: fitness values vary, so LONs are not trivial.
 TINY = """

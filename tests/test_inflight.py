@@ -164,6 +164,8 @@ TENSORS = {
     "sim.phi": ("float64", 2),
     "sim.phi_dot": ("float64", 2),
     "sim.step_count": ("int64", 1),
+    "sim.upright_all_sum": ("float64", 1),
+    "sim.upright_mean_sum": ("float64", 1),
     "sim.upright_sum": ("float64", 1),
     "sim.x": ("float64", 2),
     "sim.x_dot": ("float64", 2),

@@ -174,6 +174,7 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
     assert digest.keys() == serial[1].keys()
 
 
+@pytest.mark.serial  # its processes' timing decides what is in flight when they yield
 def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_path, caplog, capfd):
     from lonlib.inflight import inflight_checkpoints
     from lonlib.lockstep_workers import run_lockstep_processes

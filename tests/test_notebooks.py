@@ -35,7 +35,12 @@ def clone_project(root: Path) -> Path:
 def execute(book: Path, out: Path, cwd: Path, **parameters) -> dict:
     """Run ``book`` with papermill's Python API in ``cwd``; the executed notebook as JSON."""
     pm.execute_notebook(
-        str(book), str(out), parameters=parameters, progress_bar=False, cwd=str(cwd)
+        str(book),
+        str(out),
+        parameters=parameters,
+        progress_bar=False,
+        cwd=str(cwd),
+        engine_name="lonlib",  # encrypted kernel connection, as make lab and make reproduce
     )
     return json.loads(out.read_text())
 

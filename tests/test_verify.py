@@ -76,3 +76,23 @@ def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
     report = verify_experiment(folder)
     assert report.ok and not report.current_version
     assert {f.check for f in report.warnings} >= {"version", "fitness"}
+
+
+def test_an_experiment_of_another_result_path_is_not_extended(damaged):
+    import dataclasses
+
+    from lonlib.experiment import run_experiment
+    from lonlib.store import read_manifest
+
+    folder, _ = damaged
+    manifest = folder / "manifest.json"
+    data = json.loads(manifest.read_text())
+    data["sessions"][0]["result_path_version"] = None
+    manifest.write_text(json.dumps(data))
+    from lonlib.configs import ExperimentConfig
+
+    config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
+    run_experiment(config, folder, progress=False)  # finished: nothing to sample, no refusal
+    with pytest.raises(ValueError, match="result-path version"):
+        run_experiment(dataclasses.replace(config, runs=config.runs + 1), folder, progress=False)
+    assert json.loads(manifest.read_text()) == data  # the refusal wrote nothing
