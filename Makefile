@@ -160,6 +160,8 @@ reproduce: setup
 	$(PAPERMILL) notebooks/record_optima.ipynb $(OUT)/notebooks/record_optima.ipynb \
 	  -r experiment_dir "$(OUT)" -p show_inline_viewer False || exit 1; \
 	$(BIN)/lonlib status $(OUT); \
+	echo "== verify (every stored number replayed from its stored Actor)"; \
+	$(BIN)/lonlib verify $(OUT) || exit 1; \
 	echo "\nDone in $$(( $$(date +%s) - start )) s. Results under $(OUT)/:"; \
 	echo "  figures/      Fig. 2 boxplot, Fig. 3 3-D LON (.png, .html), Figs. 4-5 histograms,"; \
 	echo "                metrics.csv (LON metrics per p), peaks.csv (peaks beside the paper's)"; \

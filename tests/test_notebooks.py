@@ -86,7 +86,8 @@ def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_pa
 
     executed = execute(books / "analyse_lon.ipynb", tmp_path / "a.ipynb", books)  # defaults
     pngs = [out for out in outputs(executed) if "image/png" in out.get("data", {})]
-    assert len(pngs) == 7  # each figure once: Fig. 2, and Figs. 3-5 for both p
+    # each figure once: Fig. 2, Figs. 3-5 for both p, robust Figs. 4-5 for both p, retention
+    assert len(pngs) == 12
     plots = [
         out for out in outputs(executed) if "application/vnd.plotly.v1+json" in out.get("data", {})
     ]
