@@ -106,6 +106,15 @@ def _analyse(args: argparse.Namespace) -> None:
         print(f"summary and claims tables pasted into {readme}")
 
 
+def _record(args: argparse.Namespace) -> None:
+    from lonlib.analysis import record_optima
+
+    paths = record_optima(args.dir, bins=args.bins, limit=args.limit)
+    for path in paths:
+        print(path)
+    print(f"{len(paths)} recordings written under {args.dir}/recordings/")
+
+
 def _verify(args: argparse.Namespace) -> None:
     from lonlib.verify import verify_experiment
 
@@ -200,6 +209,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="also paste the summary and claims tables between their markers in this file",
     )
     analysis.set_defaults(func=_analyse)
+
+    record = sub.add_parser(
+        "record",
+        help="rerun recordings of the best optima, the sinks at the peaks and the best of each "
+        "behaviour, replayed from their stored Actors",
+    )
+    record.add_argument("dir", help="experiment folder, e.g. data/reference")
+    record.add_argument("--bins", type=int, default=50, help="histogram bins of the peaks")
+    record.add_argument("--limit", type=int, default=24, help="at most this many recordings")
+    record.set_defaults(func=_record)
 
     verify = sub.add_parser(
         "verify",
