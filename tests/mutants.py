@@ -37,6 +37,9 @@ class Mutant:
 DDPG, BH, SIM = "lonlib/ddpg.py", "lonlib/basin_hopping.py", "lonlib/pendulum.py"
 LEAN, AUTOGRAD = "lonlib/ddpg_update.py", "lonlib/ddpg_autograd.py"
 REPLAY, STREAMS, LOCKSTEP = "lonlib/replay.py", "lonlib/random_streams.py", "lonlib/lockstep.py"
+ROLLOUT, NETS, PMATH = "lonlib/rollout.py", "lonlib/nets.py", "lonlib/portable_math.py"
+BEHAVIOUR, VERIFY = "lonlib/behaviour.py", "lonlib/verify.py"
+ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
@@ -45,7 +48,12 @@ GUARDS = {
     LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py", "tests/test_lockstep.py"],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
-    SIM: ["tests/test_pendulum.py"],
+    SIM: ["tests/test_pendulum.py", "tests/test_rollout.py"],
+    ROLLOUT: ONE_ROLLOUT,
+    NETS: ["tests/test_nets.py", *ONE_ROLLOUT],
+    PMATH: ONE_ROLLOUT,
+    BEHAVIOUR: ["tests/test_behaviour.py", "tests/test_rollout.py"],
+    VERIFY: ["tests/test_verify.py"],
 }
 
 MUTANTS = [
@@ -422,7 +430,12 @@ MUTANTS = [
         "upright_each = cos < self._cos_upright",
         "upright test inverted",
     ),
-    Mutant(SIM, "upright *= running", "upright *= 1.0", "ended episodes keep scoring"),
+    Mutant(
+        SIM,
+        "upright_each = (cos > self._cos_upright) & running[:, None]",
+        "upright_each = cos > self._cos_upright",
+        "ended episodes keep scoring",
+    ),
     Mutant(
         SIM,
         "reward = height.mean(axis=1) + cfg.termination_penalty * terminated",
@@ -434,6 +447,49 @@ MUTANTS = [
         "reason = np.where((gaps > cfg.tether_length).any(axis=1), EndReason.TETHER, reason)",
         "reason = np.where((gaps > 2 * cfg.tether_length).any(axis=1), EndReason.TETHER, reason)",
         "tether rule",
+    ),
+    # --- the one rollout: defined arithmetic, both aggregations, conditioning, verify
+    Mutant(
+        NETS,
+        "            h = sigmoid(h)",
+        "            h = 0.5 * (1.0 + np.tanh(0.5 * h))",
+        "one-rollout: a CPU-dispatched activation",
+    ),
+    Mutant(
+        NETS,
+        "h = np.add.accumulate(products, axis=2)[:, :, -1] + bias",
+        "h = products.sum(axis=2) + bias",
+        "one-rollout: a reduction of undefined order",
+    ),
+    Mutant(
+        PMATH,
+        "r = (x - k * _LN2_HI) - k * _LN2_LO",
+        "r = x - k * _LN2_HI",
+        "one-rollout: exp's range reduction",
+    ),
+    Mutant(
+        ROLLOUT,
+        'fitness=mean if scoring.estimate == "robust" else head.fitness',
+        'fitness=head.fitness if scoring.estimate == "robust" else mean',
+        "one-rollout: estimates swapped",
+    ),
+    Mutant(
+        SIM,
+        "upright_all = upright_each.all(axis=1).astype(np.float64)",
+        "upright_all = upright_each.any(axis=1).astype(np.float64)",
+        "one-rollout: all rods read as any rod",
+    ),
+    Mutant(
+        BEHAVIOUR,
+        "fitness=float(result.fitness[row]),",
+        "fitness=float(result.fitness_mean[row]),",
+        "one-rollout: the descriptor's fitness from the other aggregation",
+    ),
+    Mutant(
+        VERIFY,
+        'if not _same(row["fitness"], expected):',
+        'if False and not _same(row["fitness"], expected):',
+        "one-rollout: verify skips the fitness",
     ),
 ]
 

@@ -135,8 +135,9 @@ def test_portable_math_is_accurate():
 
 
 def test_both_aggregations_come_from_one_episode():
-    config = PendulumConfig(n_carts=2, steps=200, upright_angle=2.5)
+    config = PendulumConfig(n_carts=2, steps=200, initial_angle=0.3)  # rods fall from the top
     result = run_actors(actors(21, 12, 1.0), config, trace=True)
+    assert (result.fitness_mean > result.fitness_all).any() and (result.fitness_all > 0).any()
     for b in range(12):
         row = result.trace.row(b, int(result.end_step[b]))
         assert result.fitness_all[b] == row.upright.all(axis=1).sum() / config.steps
@@ -162,15 +163,18 @@ def test_robust_scores_use_the_same_perturbed_starts_for_every_policy():
 
 
 def test_the_descriptor_describes_the_scored_episode():
-    thetas = actors(41, 4)
+    config = PendulumConfig(steps=300, initial_angle=0.3)  # rods start near the top: f > 0
+    thetas = actors(41, 4, 1.0)
     scoring = Scoring(starts=3)
-    scores = score_actors(thetas, SHORT, scoring, conditioning=True)
-    many = describe_actors(thetas, SHORT, scoring)
+    scores = score_actors(thetas, config, scoring, conditioning=True)
+    many = describe_actors(thetas, config, scoring)
+    assert (scores.fitness > 0).all() and (scores.nominal.fitness_mean > scores.fitness).any()
     for b in range(4):
-        one = describe(thetas[b], SHORT, scoring)
+        one = describe(thetas[b], config, scoring)
         assert one == many[b]
         assert one.fitness == scores.fitness[b] and one.robust_mean == scores.robust_mean[b]
-        assert one.fitness_all <= one.end_step / SHORT.steps
+        assert one.fitness_mean == scores.nominal.fitness_mean[b]
+        assert one.fitness_all <= one.end_step / config.steps
         assert one.robust_std == scores.robust_std[b]
 
 
