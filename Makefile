@@ -85,14 +85,16 @@ test: setup $(if $(BROWSER_TEST),$(VENV)/.lab-installed)
 	$(BIN)/python -m pytest -q -m serial
 
 # Upstream drift, seen before it reaches a user: a fresh venv with the newest versions
-# pyproject.toml allows (torch as in setup), the same tests. Not part of `make test` or CI.
+# pyproject.toml allows (torch held at setup's version and build), the same tests. Not part
+# of `make test` or CI.
 test-latest:
 	rm -rf $(LATEST)
 	$(PYTHON) -m venv $(LATEST)
 	$(LATEST)/bin/python -m pip install --quiet --upgrade pip
 	$(LATEST)/bin/python -m pip install --quiet $(TORCH)
+	echo "$(TORCH)" > $(LATEST)/torch-constraint.txt
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
-	  -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
+	  -c $(LATEST)/torch-constraint.txt -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
 	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
 	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
 	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
