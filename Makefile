@@ -62,10 +62,13 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet $(PIP)
 
 # Install a lock: every package at its locked version and hash, nothing resolved (the lock is
-# complete; --no-deps also keeps stable-baselines3's torch requirement from being resolved),
-# then check that every installed package's requirements hold.
+# complete; --no-deps also keeps stable-baselines3's torch requirement from being resolved).
+# Then check that every installed package's requirements hold (a dependency added to
+# pyproject.toml but not locked yet fails here: run `make lock`).
 define install_lock
 	$(1)/bin/python -m pip install --quiet --no-deps --require-hashes -r $(2)
+endef
+define check_requirements
 	$(1)/bin/python -m pip check >$(1)/pip-check.txt || { cat $(1)/pip-check.txt; exit 1; }
 endef
 
@@ -74,6 +77,7 @@ $(STAMP): $(REQ)/dev.txt pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet $(TORCH)
 	$(call install_lock,$(VENV),$(REQ)/dev.txt)
 	$(BIN)/python -m pip install --quiet --no-deps -e .
+	$(call check_requirements,$(VENV))
 	$(BIN)/rerun analytics disable >/dev/null 2>&1 || true
 	touch $(STAMP)
 
@@ -85,14 +89,16 @@ test: setup $(if $(BROWSER_TEST),$(VENV)/.lab-installed)
 	$(BIN)/python -m pytest -q -m serial
 
 # Upstream drift, seen before it reaches a user: a fresh venv with the newest versions
-# pyproject.toml allows (torch as in setup), the same tests. Not part of `make test` or CI.
+# pyproject.toml allows (torch held at setup's version and build), the same tests. Not part
+# of `make test` or CI.
 test-latest:
 	rm -rf $(LATEST)
 	$(PYTHON) -m venv $(LATEST)
 	$(LATEST)/bin/python -m pip install --quiet --upgrade pip
 	$(LATEST)/bin/python -m pip install --quiet $(TORCH)
+	echo "$(TORCH)" > $(LATEST)/torch-constraint.txt
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
-	  -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
+	  -c $(LATEST)/torch-constraint.txt -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
 	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
 	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
 	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
@@ -129,6 +135,7 @@ format: setup
 
 $(VENV)/.bench-installed: $(STAMP) $(REQ)/bench.txt
 	$(call install_lock,$(VENV),$(REQ)/bench.txt)
+	$(call check_requirements,$(VENV))
 	touch $@
 
 bench: $(VENV)/.bench-installed
@@ -136,6 +143,7 @@ bench: $(VENV)/.bench-installed
 
 $(VENV)/.lab-installed: $(STAMP) $(REQ)/lab.txt
 	$(call install_lock,$(VENV),$(REQ)/lab.txt)
+	$(call check_requirements,$(VENV))
 	touch $@
 
 # The whole project in the file browser (data/ beside notebooks/), opened at notebooks/.
