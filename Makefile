@@ -3,7 +3,11 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
-TORCH  := torch==2.13.0
+# torch's CPU build, never a CUDA one: the local version "+cpu" is not on PyPI, so a plain
+# index cannot satisfy it with gigabytes of CUDA wheels. pip finds it where it is configured
+# to look (this machine's find-links), else on PyTorch's CPU index (TORCH_INDEX).
+TORCH  := torch==2.13.0+cpu
+TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 PIP    := pip==26.3
 UV     := uv==0.13.9
 # The lock (README, "Environment, lock and reproducibility"): exact versions with hashes, one
@@ -68,13 +72,17 @@ $(BIN)/python:
 define install_lock
 	$(1)/bin/python -m pip install --quiet --no-deps --require-hashes -r $(2)
 endef
+define install_torch
+	$(1)/python -m pip install --quiet "$(TORCH)" 2>/dev/null \
+	  || $(1)/python -m pip install --quiet "$(TORCH)" --extra-index-url $(TORCH_INDEX)
+endef
 define check_requirements
 	$(1)/bin/python -m pip check >$(1)/pip-check.txt || { cat $(1)/pip-check.txt; exit 1; }
 endef
 
 # Reinstall only when the lock changes; a second `make setup` takes seconds.
 $(STAMP): $(REQ)/dev.txt pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet $(TORCH)
+	$(call install_torch,$(BIN))
 	$(call install_lock,$(VENV),$(REQ)/dev.txt)
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	$(call check_requirements,$(VENV))
@@ -95,7 +103,7 @@ test-latest:
 	rm -rf $(LATEST)
 	$(PYTHON) -m venv $(LATEST)
 	$(LATEST)/bin/python -m pip install --quiet --upgrade pip
-	$(LATEST)/bin/python -m pip install --quiet $(TORCH)
+	$(call install_torch,$(LATEST)/bin)
 	echo "$(TORCH)" > $(LATEST)/torch-constraint.txt
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
 	  -c $(LATEST)/torch-constraint.txt -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"

@@ -107,6 +107,35 @@ def session_versions(folder: Path) -> list[str | None]:
     return [session.get("result_path_version") for session in sessions]
 
 
+def _provenance_findings(folder: Path) -> list[Finding]:
+    """Warnings for sessions that ran another environment (lock hash or installed set) or
+    other torch CPU kernels than the others: training may then differ in the last bits."""
+    sessions = read_manifest(folder).get("sessions", [])
+    facts = {
+        "environment (lock or installed packages)": [
+            (s.get("environment") or {}).get("installed_sha256") for s in sessions
+        ],
+        "torch CPU kernels": [(s.get("cpu") or {}).get("torch") for s in sessions],
+    }
+    out = []
+    for what, values in facts.items():
+        recorded = [v for v in values if v is not None]
+        if len(set(recorded)) > 1:
+            out.append(
+                Finding(
+                    "warning",
+                    "provenance",
+                    None,
+                    None,
+                    None,
+                    f"sessions ran with {len(set(recorded))} different {what} "
+                    f"({', '.join(sorted(str(v)[:12] for v in set(recorded)))}): their runs may "
+                    "differ from a single-session run in the last bits of training",
+                )
+            )
+    return out
+
+
 def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 32) -> VerifyReport:
     """Replay every stored trial (and recording) of the experiment in ``folder`` and report
     what does not come back exactly (see the module docstring)."""
@@ -131,6 +160,7 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
                 f"is {RESULT_PATH_VERSION}",
             )
         )
+    report.findings.extend(_provenance_findings(folder))
     thetas, rows = _stored_actors(folder, trials, report, mismatch)
     scoring = config.ddpg.scoring
     for start in range(0, len(rows), batch):

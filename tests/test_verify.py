@@ -96,3 +96,22 @@ def test_an_experiment_of_another_result_path_is_not_extended(damaged):
     with pytest.raises(ValueError, match="result-path version"):
         run_experiment(dataclasses.replace(config, runs=config.runs + 1), folder, progress=False)
     assert json.loads(manifest.read_text()) == data  # the refusal wrote nothing
+
+
+def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
+    folder, _ = damaged
+    manifest = folder / "manifest.json"
+    data = json.loads(manifest.read_text())
+    first = data["sessions"][0]
+    data["sessions"].append(
+        {
+            **first,
+            "cpu": {**first["cpu"], "torch": "AVX512"},
+            "environment": {"installed_sha256": "x"},
+        }
+    )
+    manifest.write_text(json.dumps(data))
+    report = verify_experiment(folder, recordings=False)
+    assert report.ok
+    messages = [f.message for f in report.warnings if f.check == "provenance"]
+    assert len(messages) == 2 and any("torch CPU kernels" in m for m in messages)
