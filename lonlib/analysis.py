@@ -23,6 +23,7 @@ from lonlib.claims_report import write_claims
 from lonlib.conditioning import (
     conditioning_by_label,
     edges_no_longer_improving,
+    peaks_under_both_aggregations,
     replay_optima,
     retention_curve,
     stored_actors,
@@ -76,6 +77,7 @@ class Analysis:
     replayed: pd.DataFrame = field(default_factory=pd.DataFrame)  # stored Actors replayed
     retention: pd.DataFrame = field(default_factory=pd.DataFrame)  # keep share over noise
     conditioning: pd.DataFrame = field(default_factory=pd.DataFrame)  # per behaviour label
+    peaks_aggregations: pd.DataFrame = field(default_factory=pd.DataFrame)  # all vs mean
     interactive: dict[str, Any] = field(default_factory=dict)
 
 
@@ -200,14 +202,18 @@ def _conditioning(folder, trials, result, save, out, bins, tolerance) -> None:
         )
         _, thetas = stored_actors(folder, trials.loc[trials["accepted"] & (trials["p"] == p)])
         curves.append(
-            retention_curve(thetas, group["replayed"].to_numpy(), config.env, seed=0).assign(p=p)
+            retention_curve(
+                thetas, group["replayed"].to_numpy(), config.env, scoring=config.ddpg.scoring
+            ).assign(p=p)
         )
     result.retention = pd.concat(curves, ignore_index=True)
     save("retention", retention_plot(result.retention))
     result.conditioning = conditioning_by_label(nodes)
     edges = edges_no_longer_improving(trials, replayed)
+    result.peaks_aggregations = peaks_under_both_aggregations(replayed, bins)
     for name, table in (
         ("replayed", replayed),
+        ("peaks_aggregations", result.peaks_aggregations),
         ("retention", result.retention),
         ("conditioning", result.conditioning),
         ("edges_rescored", edges),

@@ -158,7 +158,7 @@ def describe(
         ],
         axis=1,
     )
-    result = run_policy(policy, config, offsets, trace=True)
+    result = run_policy(policy, config, offsets, trace=1)
     return describe_rollout(result, config, 0, result.fitness[1:])
 
 
@@ -174,7 +174,7 @@ def describe_actors(
     perturbed = perturbed_offsets(config, m, scoring.noise, scoring.seed, scoring.eval_seed)
     offsets = np.concatenate([np.repeat(nominal, k, axis=1), np.tile(perturbed, (1, k, 1))], axis=1)
     batch = np.concatenate([thetas, np.repeat(thetas, m, axis=0)])
-    result = run_policy(actor_policy(batch, config), config, offsets, trace=True)
+    result = run_policy(actor_policy(batch, config), config, offsets, trace=k)
     robust = result.fitness[k:].reshape(k, m)
     return [describe_rollout(result, config, b, robust[b]) for b in range(k)]
 

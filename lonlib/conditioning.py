@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from lonlib.behaviour import describe_actors, label
+from lonlib.peaks import compare_with_paper, detect_peaks
 from lonlib.pendulum import PendulumConfig
 from lonlib.rollout import Scoring, score_actors
 from lonlib.store import optimum_path, read_optimum
@@ -37,6 +38,7 @@ __all__ = [
     "NOISE_LEVELS",
     "conditioning_by_label",
     "edges_no_longer_improving",
+    "peaks_under_both_aggregations",
     "replay_optima",
     "retention_curve",
 ]
@@ -68,8 +70,10 @@ def replay_optima(
     batch: int = 32,
 ) -> pd.DataFrame:
     """Every stored Actor of ``trials`` replayed: its stored ``fitness`` and ``label`` beside
-    the replayed nominal fitness (``replayed``, ``replayed_all``, ``replayed_mean``), the
-    conditioning (``robust_mean``, ``robust_min``, ``robust_std``) and ``replayed_label``."""
+    the replayed nominal fitness (``replayed``, ``replayed_all``, ``replayed_mean``), what
+    the scoring's estimate compares (``replayed_estimate``: the nominal fitness, or the robust
+    mean under ``robust``), the conditioning (``robust_mean``, ``robust_min``,
+    ``robust_std``) and ``replayed_label``."""
     rows, thetas = stored_actors(Path(folder), trials)
     out = []
     for start in range(0, len(rows), batch):
@@ -77,6 +81,9 @@ def replay_optima(
             out.append(
                 {
                     "replayed": d.fitness,
+                    "replayed_estimate": d.robust_mean
+                    if scoring.estimate == "robust"
+                    else d.fitness,
                     "replayed_all": d.fitness_all,
                     "replayed_mean": d.fitness_mean,
                     "robust_mean": d.robust_mean,
@@ -94,18 +101,19 @@ def retention_curve(
     nominal: np.ndarray,
     config: PendulumConfig,
     levels: tuple[float, ...] = NOISE_LEVELS,
-    starts: int = 8,
-    seed: int = 0,
+    scoring: Scoring = Scoring(),
 ) -> pd.DataFrame:
     """Per noise level: the share of the optima (``thetas [k, P]`` with nominal fitness
     ``nominal [k]`` > 0) whose robust mean keeps at least :data:`KEEP_SHARE` of it, and the
-    median robust/nominal ratio. The same ``starts`` draws (scaled) at every level."""
+    median robust/nominal ratio. The experiment's ``scoring`` gives the nominal start
+    (``eval_seed``), the number of starts and their seed; the same draws, scaled, at every
+    level (at noise 0 every optimum keeps its fitness exactly)."""
     positive = np.asarray(nominal) > 0
     thetas, nominal = np.asarray(thetas)[positive], np.asarray(nominal)[positive]
     rows = []
     for level in levels:
-        scoring = Scoring(estimate="robust", starts=starts, noise=float(level), seed=seed)
-        robust = score_actors(thetas, config, scoring).fitness if len(thetas) else np.zeros(0)
+        at_level = dataclasses.replace(scoring, estimate="robust", noise=float(level))
+        robust = score_actors(thetas, config, at_level).fitness if len(thetas) else np.zeros(0)
         ratio = robust / nominal if len(nominal) else np.zeros(0)
         rows.append(
             {
@@ -142,9 +150,12 @@ def conditioning_by_label(replayed: pd.DataFrame) -> pd.DataFrame:
 
 def edges_no_longer_improving(trials: pd.DataFrame, replayed: pd.DataFrame) -> pd.DataFrame:
     """Accepted transitions (parent -> accepted child, the LON's edges) whose replayed
-    fitnesses are deteriorating (child < parent), with stored and replayed numbers; edges
-    whose parent or child has no stored Actor are skipped."""
-    score = {(float(r.p), int(r.run), int(r.index)): r.replayed for r in replayed.itertuples()}
+    fitnesses, under the estimate Algorithm 2 compared (``replayed_estimate``), are
+    deteriorating (child < parent), with stored and replayed numbers; edges whose parent or
+    child has no stored Actor are skipped. Empty for an experiment that verifies."""
+    score = {
+        (float(r.p), int(r.run), int(r.index)): r.replayed_estimate for r in replayed.itertuples()
+    }
     stored = {(float(r.p), int(r.run), int(r.index)): r.fitness for r in trials.itertuples()}
     rows = []
     for r in trials[trials["accepted"] & (trials["parent"] >= 0)].itertuples():
@@ -174,6 +185,13 @@ def edges_no_longer_improving(trials: pd.DataFrame, replayed: pd.DataFrame) -> p
     )
 
 
-def with_noise(scoring: Scoring, noise: float) -> Scoring:
-    """``scoring`` with another start-noise level."""
-    return dataclasses.replace(scoring, noise=noise)
+def peaks_under_both_aggregations(replayed: pd.DataFrame, bins: int = 50) -> pd.DataFrame:
+    """Peaks of the accepted optima's replayed nominal fitness per p under both
+    aggregations (``all``: every rod upright; ``mean``: the upright share), beside the
+    paper's peaks (:func:`lonlib.peaks.compare_with_paper`)."""
+    tables = []
+    for p, group in replayed[replayed["accepted"]].groupby("p", sort=True):
+        for mode, column in (("all", "replayed_all"), ("mean", "replayed_mean")):
+            found = compare_with_paper(detect_peaks(group[column].to_numpy(), bins=bins))
+            tables.append(found.assign(p=p, fitness_mode=mode, optima=len(group)))
+    return pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()

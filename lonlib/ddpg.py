@@ -140,6 +140,7 @@ class DDPGConfig:
         for name in ("buffer_size", "batch_size", "warmup_steps", "max_steps", "patience_steps"):
             check_range(name, getattr(self, name), 1)
         check_range("min_steps", self.min_steps, 0)
+        check_range("eval_seed", self.eval_seed, 0, 2**63 - 1)
         check_range("threads", self.threads, 1, 256)
         check_range("buffer_size", self.buffer_size, 1, 2**31 - 1)
         check_range("noise_std", self.noise_std, 0.0, 1.0)

@@ -119,14 +119,15 @@ def perturbed_offsets(
 
 
 def run_policy(
-    policy: Policy, config: PendulumConfig, offsets: np.ndarray, trace: bool = False
+    policy: Policy, config: PendulumConfig, offsets: np.ndarray, trace: bool | int = False
 ) -> Rollout:
     """Run ``policy`` greedily from the starts ``offsets [4, B, n]`` until every episode has
     ended: the one loop that steps the simulator for a fixed policy.
 
     ``policy`` maps normalised sensors ``[B, 10 n]`` to actions ``[B, n]`` in [0, 1]; a batch
     of different policies is one callable that evaluates row ``b`` with policy ``b``. With
-    ``trace`` every step is kept (:class:`Trace`).
+    ``trace`` every step of every row is kept (:class:`Trace`); an integer ``k`` keeps the
+    first ``k`` rows only (about 1 MB per 2000-step row).
     """
     offsets = np.asarray(offsets, dtype=np.float64)
     if offsets.ndim != 3 or offsets.shape[0] != 4 or offsets.shape[2] != config.n_carts:
@@ -135,26 +136,28 @@ def run_policy(
     sim.reset(noise=offsets)
     episode_return = np.zeros(sim.batch_size)
     steps: list[tuple[np.ndarray, ...]] = []
+    kept_rows = sim.batch_size if trace is True else int(trace)
     while not sim.done.all():
         observation = sim.observe()
         actions = np.asarray(policy(observation), dtype=np.float64)
         outcome = sim.step(actions)
         episode_return += outcome.reward
-        if trace:
+        if kept_rows:
+            k = kept_rows
             steps.append(
                 (
-                    sim.x.copy(),
-                    sim.x_dot.copy(),
-                    sim.phi.copy(),
-                    sim.phi_dot.copy(),
-                    observation,
-                    actions,
-                    outcome.upright_each,
-                    sim.fitness.copy(),
+                    sim.x[:k].copy(),
+                    sim.x_dot[:k].copy(),
+                    sim.phi[:k].copy(),
+                    sim.phi_dot[:k].copy(),
+                    observation[:k],
+                    actions[:k],
+                    outcome.upright_each[:k],
+                    sim.fitness[:k].copy(),
                 )
             )
     kept = None
-    if trace:
+    if kept_rows:
         kept = Trace(*(np.stack(column) for column in zip(*steps, strict=True)))
     return Rollout(
         fitness=sim.fitness.copy(),
@@ -251,6 +254,8 @@ class Scoring:
         check_choice("fitness_estimate", self.estimate, ESTIMATES)
         check_range("robust_starts", self.starts, 1, 100_000)
         check_range("robust_noise", self.noise, 0.0, 0.5)
+        check_range("robust_seed", self.seed, 0, 2**63 - 1)
+        check_range("eval_seed", self.eval_seed, 0, 2**63 - 1)
 
 
 @dataclass(frozen=True)

@@ -32,8 +32,9 @@ import numpy as np
 import pandas as pd
 
 from lonlib.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
+from lonlib.nets import actor_spec
 from lonlib.result_path import RESULT_PATH_VERSION
-from lonlib.store import optimum_path, read_manifest, read_optimum
+from lonlib.store import CorruptDataError, optimum_path, read_manifest, read_optimum
 
 __all__ = ["Finding", "VerifyReport", "verify_experiment"]
 
@@ -161,31 +162,54 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
             )
         )
     report.findings.extend(_provenance_findings(folder))
-    thetas, rows = _stored_actors(folder, trials, report, mismatch)
+    thetas, rows = _stored_actors(folder, trials, config, report, mismatch)
     scoring = config.ddpg.scoring
+    replayed: dict[tuple[float, int, int], BehaviourDescriptor] = {}
     for start in range(0, len(rows), batch):
         chunk = rows[start : start + batch]
         descriptors = describe_actors(np.stack(thetas[start : start + batch]), config.env, scoring)
         for row, descriptor in zip(chunk, descriptors, strict=True):
             report.findings.extend(_check_trial(row, descriptor, scoring.estimate, mismatch))
+            replayed[(float(row["p"]), int(row["run"]), int(row["index"]))] = descriptor
         report.replayed += len(chunk)
     if recordings:
-        _check_recordings(folder, config, trials, report, mismatch)
+        _check_recordings(folder, trials, replayed, report, mismatch)
     return report
 
 
 def _stored_actors(
-    folder: Path, trials: pd.DataFrame, report: VerifyReport, mismatch: str
+    folder: Path, trials: pd.DataFrame, config, report: VerifyReport, mismatch: str
 ) -> tuple[list[np.ndarray], list[dict]]:
+    """The stored Actors that can be replayed; a missing or unusable file is a finding
+    naming it (an error on data of this result-path version, where every trial's Actor is
+    stored; a warning on older data, which kept accepted optima only)."""
+    size = actor_spec(config.env.n_carts).n_params
     thetas, rows = [], []
     for row in trials.to_dict("records"):
         p, run, index = float(row["p"]), int(row["run"]), int(row["index"])
         path = optimum_path(folder, p, run, index)
         if not path.exists():
-            severity = mismatch if row["accepted"] else "warning"
-            report.findings.append(Finding(severity, "actor", p, run, index, "no Actor stored"))
+            report.findings.append(Finding(mismatch, "actor", p, run, index, "no Actor stored"))
             continue
-        thetas.append(read_optimum(path).theta)
+        try:
+            theta = np.asarray(read_optimum(path).theta)
+        except CorruptDataError as error:
+            report.findings.append(Finding("error", "actor", p, run, index, str(error)))
+            continue
+        if theta.shape != (size,) or not np.isfinite(theta).all():
+            problem = "NaN or infinite values" if theta.shape == (size,) else f"shape {theta.shape}"
+            report.findings.append(
+                Finding(
+                    "error",
+                    "actor",
+                    p,
+                    run,
+                    index,
+                    f"{path}: the Actor has {problem}, not {size} finite parameters",
+                )
+            )
+            continue
+        thetas.append(theta)
         rows.append(row)
     return thetas, rows
 
@@ -252,7 +276,10 @@ def _check_trial(
         )
 
 
-def _check_recordings(folder, config, trials, report, mismatch) -> None:
+def _check_recordings(folder, trials, replayed, report, mismatch) -> None:
+    """Each recording names a stored trial and shows its nominal episode: the recording's
+    fitness, end reason and end step equal the trial's stored nominal fitness and those of
+    its Actor's replayed episode."""
     from lonlib.record import recording_properties
 
     by_key = {(float(r.p), int(r.run), int(r.index)): r for r in trials.itertuples()}
@@ -277,7 +304,7 @@ def _check_recordings(folder, config, trials, report, mismatch) -> None:
                     None,
                     None,
                     f"{path.name}: names no trial (recorded before recordings carried p, run "
-                    "and index); run `lonlib record` to record it again",
+                    "and index); `lonlib record` records it again",
                 )
             )
             continue
@@ -288,15 +315,24 @@ def _check_recordings(folder, config, trials, report, mismatch) -> None:
                 Finding(mismatch, "recording", *key, f"{path.name}: no such stored trial")
             )
             continue
-        recorded = props.get("fitness")
-        if config.ddpg.fitness_estimate == "nominal" and not _same(recorded, trial.fitness):
+        stored = getattr(trial, f"{PREFIX}fitness", trial.fitness)
+        shown = {k: props.get(k) for k in ("fitness", "end_reason", "end_step")}
+        expected = {"fitness": stored}
+        descriptor = replayed.get(key)
+        if descriptor is not None:
+            expected.update(end_reason=descriptor.end_reason, end_step=descriptor.end_step)
+        differing = [
+            f"{name} {shown[name]!r}, the trial's {value!r}"
+            for name, value in expected.items()
+            if not _same(shown[name], value)
+        ]
+        if differing:
             report.findings.append(
                 Finding(
                     mismatch,
                     "recording",
                     *key,
-                    f"{path.name}: shows an episode of fitness {recorded!r}, the trial's is "
-                    f"{trial.fitness!r}",
+                    f"{path.name} shows another episode: {'; '.join(differing)}",
                 )
             )
 

@@ -39,7 +39,7 @@ LEAN, AUTOGRAD = "lonlib/ddpg_update.py", "lonlib/ddpg_autograd.py"
 REPLAY, STREAMS, LOCKSTEP = "lonlib/replay.py", "lonlib/random_streams.py", "lonlib/lockstep.py"
 ROLLOUT, NETS, PMATH = "lonlib/rollout.py", "lonlib/nets.py", "lonlib/portable_math.py"
 BEHAVIOUR, VERIFY = "lonlib/behaviour.py", "lonlib/verify.py"
-ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py"]
+ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
@@ -52,7 +52,7 @@ GUARDS = {
     ROLLOUT: ONE_ROLLOUT,
     NETS: ["tests/test_nets.py", *ONE_ROLLOUT],
     PMATH: ONE_ROLLOUT,
-    BEHAVIOUR: ["tests/test_behaviour.py", "tests/test_rollout.py"],
+    BEHAVIOUR: ["tests/test_behaviour.py", *ONE_ROLLOUT, "tests/test_calibration.py"],
     VERIFY: ["tests/test_verify.py"],
 }
 
@@ -490,6 +490,30 @@ MUTANTS = [
         'if not _same(row["fitness"], expected):',
         'if False and not _same(row["fitness"], expected):',
         "one-rollout: verify skips the fitness",
+    ),
+    Mutant(
+        VERIFY,
+        'expected = replayed.robust_mean if estimate == "robust" else replayed.fitness',
+        "expected = replayed.fitness",
+        "one-rollout: verify compares the nominal fitness under robust",
+    ),
+    Mutant(
+        VERIFY,
+        "            if not _same(shown[name], value)",
+        "            if False",
+        "one-rollout: verify does not compare recordings",
+    ),
+    Mutant(
+        VERIFY,
+        'row["fitness"] <= end_step / steps + 1e-12',
+        'row["fitness"] <= 1e9',
+        "one-rollout: verify does not check the end step",
+    ),
+    Mutant(
+        ROLLOUT,
+        "offsets = np.repeat(nominal_offsets(config, seed or 0), batch_size, axis=1)",
+        "offsets = np.repeat(nominal_offsets(config, 0), batch_size, axis=1)",
+        "one-rollout: evaluate ignores its seed",
     ),
 ]
 

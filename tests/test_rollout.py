@@ -235,3 +235,40 @@ def test_the_delegation_check_sees_a_loop_that_steps_a_simulator(tmp_path):
     module = tmp_path / "sneaky.py"
     module.write_text("def f(sim, policy):\n    while True:\n        sim.step(policy(1))\n")
     assert loops_stepping_a_simulator(module) == [2]
+
+
+def test_every_entry_point_scores_from_the_same_noisy_start():
+    """With start noise, evaluate(seed=s), score_actors, describe, DDPG's scoring and a
+    recording all start from the nominal start drawn from eval_seed s, and another seed
+    gives another start."""
+    import tempfile
+
+    from lonlib.ddpg import DDPGConfig
+    from lonlib.record import record, recording_properties
+    from lonlib.rollout import actor_policy, evaluate
+
+    config = PendulumConfig(steps=300, initial_angle=0.3, initial_noise=0.2)
+    thetas = actors(51, 3, 1.0)
+    scoring = DDPGConfig(eval_seed=3).scoring
+    assert scoring.eval_seed == 3
+    scored = score_actors(thetas, config, scoring).fitness
+    by_evaluate = evaluate(actor_policy(thetas, config), config, 3, seed=3, same_start=True)
+    np.testing.assert_array_equal(by_evaluate.fitness, scored)
+    assert describe(thetas[0], config, scoring).fitness == scored[0]
+    other = score_actors(thetas, config, Scoring(eval_seed=4)).fitness
+    assert not np.array_equal(other, scored)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "x.rrd"
+        record(thetas[0], config, path, scoring=scoring)
+        assert recording_properties(path)["fitness"] == scored[0]
+
+
+@pytest.mark.parametrize("field", ["seed", "eval_seed"])
+def test_negative_seeds_are_refused_by_name(field):
+    from lonlib.ddpg import DDPGConfig
+
+    with pytest.raises(ValueError, match="seed"):
+        Scoring(**{field: -1})
+    name = "robust_seed" if field == "seed" else "eval_seed"
+    with pytest.raises(ValueError, match=name):
+        DDPGConfig(**{name: -1})
