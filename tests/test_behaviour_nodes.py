@@ -110,6 +110,10 @@ def test_standardisation_zero_spread_nan_and_end_share():
     assert (z[:, [0, 1, 3, 4, 5, 6]] == 0).all()  # no spread
     assert list(z[:, FEATURES.index("turns_0")]) == [-1.0, 1.0]  # population std
     assert list(z[:, FEATURES.index("end_share")]) == [1.0, -1.0]
+    trials = table([[(0.1, 0.0), (0.2, 10.0), (0.3, 20.0)]])
+    trials["b_phase"] = [float("nan"), -0.5, 0.5]  # a NaN in a column with spread: 0
+    z = standardise(behaviour_features(trials, FEATURES))
+    assert list(z[:, FEATURES.index("phase")]) == [0.0, -1.0, 1.0]
     one_cart = table([[(0.1, 0.0), (0.2, 10.0)]], rods=1)
     raw = behaviour_features(one_cart, FEATURES)
     assert "upright_share_1" not in raw and "turns_1" not in raw and raw["phase"].isna().all()

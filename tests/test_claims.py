@@ -160,6 +160,11 @@ VERDICT_CASES = {
         None,
         {"a": CONTRADICTED, "b": CONTRADICTED},
     ),
+    "the low basin half as strong": (  # 10 of 30: the 90 % upper end is 0.4994
+        {1e-4: [(0.22,)] * 10 + [(0.72,)] * 20},
+        None,
+        {"b": CONTRADICTED},
+    ),
     "five even basins": ({1e-4: FIVE_EVEN}, None, {"a": REPRODUCED, "b": INCONCLUSIVE}),
     "one typical level and strays": (
         {1e-4: [(0.40,)] * 12 + [(0.10,), (0.70,), (0.90,)]},
@@ -179,8 +184,8 @@ VERDICT_CASES = {
         None,
         {"e": CONTRADICTED},
     ),
-    "a shallow dip": (
-        {1e-4: [(0.55,)] * 5 + [(0.65,)] * 3 + [(0.75,)] * 4},
+    "a shallow dip": (  # 7 of 30: the 90 % upper end is 0.39
+        {1e-4: [(0.55,)] * 12 + [(0.65,)] * 7 + [(0.75,)] * 11},
         None,
         {"e": INCONCLUSIVE},
     ),
