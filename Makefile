@@ -182,6 +182,7 @@ reproduce: setup
 	echo "  figures/      Fig. 2 boxplot, Fig. 3 3-D LON (.png, .html), Figs. 4-5 histograms,"; \
 	echo "                metrics.csv (LON metrics per p), peaks.csv (peaks beside the paper's)"; \
 	echo "                claims.md, claims.csv (the paper's claims tested: evidence and verdicts)"; \
+	echo "                claim_d_curve.csv/.png (claim d over epsilon), power.csv (runs per claim)"; \
 	echo "  recordings/   rerun .rrd files: view with  $(BIN)/rerun $(OUT)/recordings/<file>.rrd"; \
 	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
 

@@ -18,7 +18,14 @@ import pandas as pd
 
 from lonlib.behaviour import descriptors_of
 from lonlib.behaviour_lon import behaviour_table, behavioural_lon
-from lonlib.claims import claims_from_trials, peaks_beside_paper
+from lonlib.claims import (
+    BEHAVIOUR_NODE_EPSILON,
+    SPARSE_MAX_SHARE,
+    claim_d_curve,
+    claims_from_trials,
+    peaks_beside_paper,
+)
+from lonlib.claims_power import power_table
 from lonlib.claims_report import write_claims
 from lonlib.conditioning import (
     conditioning_by_label,
@@ -33,6 +40,7 @@ from lonlib.lon import build_lon, node_id, sinks
 from lonlib.lon_metrics import lon_metrics
 from lonlib.peaks import compare_with_paper, detect_peaks
 from lonlib.plots import (
+    claim_d_curve_plot,
     fitness_histogram,
     lon_3d,
     lon_3d_interactive,
@@ -71,6 +79,8 @@ class Analysis:
     behavioural_metrics: pd.DataFrame = field(default_factory=pd.DataFrame)
     claims: pd.DataFrame = field(default_factory=pd.DataFrame)  # the paper's claims, verdicts
     claim_peaks: pd.DataFrame = field(default_factory=pd.DataFrame)  # peaks at the claims' p
+    claim_d_curve: pd.DataFrame = field(default_factory=pd.DataFrame)  # claim d over epsilon
+    power: pd.DataFrame = field(default_factory=pd.DataFrame)  # runs each claim needs, cost
     summary: pd.DataFrame = field(default_factory=pd.DataFrame)  # how far, what found, per p
     files: list[Path] = field(default_factory=list)
     figures: dict[str, plt.Figure] = field(default_factory=dict)
@@ -90,7 +100,9 @@ def analyse(
     conditioning: bool = True,
 ) -> Analysis:
     """Figures 2-5, the 3-D LON (PNG + HTML), peaks beside the paper's, metrics per p, the
-    paper's claims tested (``claims.csv``, ``claims.md``: :mod:`lonlib.claims`), the
+    paper's claims tested (``claims.csv``, ``claims.md``: :mod:`lonlib.claims`; claim d's
+    curve over epsilon, ``claim_d_curve.csv`` and ``.png``; the runs each claim needs and
+    their cost, ``power.csv``: :mod:`lonlib.claims_power`), the
     experiment's summary per p (``summary.csv``: :mod:`lonlib.summary`), and a
     sensitivity view when more than two p values are present. Reads the stored runs and
     writes only under ``<folder>/figures/``.
@@ -163,7 +175,16 @@ def analyse(
         result.files.append(path)
     result.claims = claims_from_trials(trials, bins, tolerance)
     result.claim_peaks = peaks_beside_paper(trials, bins, tolerance)
-    result.files += write_claims(result.claims, result.claim_peaks, out)
+    result.claim_d_curve = claim_d_curve(trials)
+    result.power = power_table()
+    result.files += write_claims(
+        result.claims, result.claim_peaks, out, result.power, result.claim_d_curve
+    )
+    if not result.claim_d_curve.empty:
+        save(
+            "claim_d_curve",
+            claim_d_curve_plot(result.claim_d_curve, BEHAVIOUR_NODE_EPSILON, SPARSE_MAX_SHARE),
+        )
     if trials["p"].nunique() > 2:
         save("sensitivity", sensitivity(result.metrics))
     if conditioning:

@@ -99,7 +99,9 @@ def _analyse(args: argparse.Namespace) -> None:
     print(f"{len(result.files)} figures and tables written to {Path(args.dir) / 'figures'}")
     if readme is not None:
         text = splice_readme(
-            readme.read_text(), claims_markdown(result.claims, result.claim_peaks), args.dir
+            readme.read_text(),
+            claims_markdown(result.claims, result.claim_peaks, result.power, result.claim_d_curve),
+            args.dir,
         )
         text = splice_summary(text, summary_markdown(result.summary), args.dir)
         readme.write_text(text, encoding="utf-8")

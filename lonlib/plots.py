@@ -362,3 +362,30 @@ def retention_plot(curve: pd.DataFrame) -> plt.Figure:
     ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def claim_d_curve_plot(
+    curve: pd.DataFrame, epsilon: float, max_share: float, title: str = "Claim d over epsilon"
+) -> plt.Figure:
+    """Claim d's curve: per epsilon, the share of behaviour nodes entered from more than
+    one other node, one line per p (``curve`` from :func:`lonlib.claims.claim_d_curve`:
+    ``p``, ``epsilon``, ``share``, ``nodes``; with ``ci_low``/``ci_high`` a band), the
+    pre-registered ``epsilon`` as a vertical line and the largest share "sparse" allows
+    (``max_share``) as a horizontal one."""
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for p, group in curve.groupby("p", sort=True):
+        (line,) = ax.plot(group["epsilon"], group["share"], "o-", label=f"p = {p_label(p)}")
+        if {"ci_low", "ci_high"} <= set(group.columns):
+            ax.fill_between(
+                group["epsilon"], group["ci_low"], group["ci_high"], color=line.get_color(),
+                alpha=0.15, linewidth=0,
+            )  # fmt: skip
+    ax.axvline(epsilon, color=GREY, linestyle="--", linewidth=1, label=f"epsilon = {epsilon:g}")
+    ax.axhline(max_share, color=RED, linestyle=":", linewidth=1, label=f"sparse: <= {max_share:g}")
+    ax.set_ylim(0, 1.02)
+    ax.set_xlabel("epsilon (standard deviations, standardised behaviour features)")
+    ax.set_ylabel("share of multi-inward nodes")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig

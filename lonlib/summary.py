@@ -32,7 +32,8 @@ def experiment_summary(folder: str | Path, trials: pd.DataFrame | None = None) -
     (``improved``) or above fitness 0 (``above_zero``); runs whose best (their incumbent,
     as ``status`` has it) is above 0; the best fitness and the median of the runs' best;
     the env steps trained; searches in flight saved in checkpoints (``in_flight``) and
-    their env steps; the behaviour labels of the stored optima, most frequent first.
+    their env steps; the behaviour labels of the accepted optima (the LON's nodes; a
+    rejected search's optimum is no node), most frequent first.
     ``trials``: the stored trials when the caller has read them already (``analyse``), so
     that the summary counts the same trials as its figures."""
     folder = Path(folder)
@@ -58,7 +59,11 @@ def experiment_summary(folder: str | Path, trials: pd.DataFrame | None = None) -
                 "env_steps": int(group["env_steps"].sum()),
                 "in_flight": int(planned["in_flight"].sum()),
                 "in_flight_steps": int(planned["in_flight_steps"].sum()),
-                "behaviours": behaviour_counts(group["label"]) if "label" in group else "",
+                "behaviours": (
+                    behaviour_counts(group.loc[group["accepted"].astype(bool), "label"])
+                    if "label" in group
+                    else ""
+                ),
             }
         )
     return pd.DataFrame(rows)
@@ -86,7 +91,7 @@ def summary_markdown(summary: pd.DataFrame) -> str:
                 f"{n} ({s / 1e6:.2f})"
                 for n, s in zip(summary["in_flight"], summary["in_flight_steps"], strict=True)
             ],
-            "behaviours of the optima": summary["behaviours"],
+            "behaviours of the accepted optima": summary["behaviours"],
         }
     )
     return markdown_table(table) + "\n"

@@ -1,6 +1,7 @@
-"""The paper's claims on synthetic experiment folders written with lonlib.store: every
-verdict can come out each way, the tests point the right way, the table renders, and the
-analysis-only command leaves the stored runs as they were."""
+"""The paper's claims on synthetic experiment folders written with lonlib.store: every claim
+can come out reproduced, contradicted, inconclusive and not testable, the tests point the
+right way, the table renders, and the analysis-only command leaves the stored runs as they
+were."""
 
 import hashlib
 import math
@@ -12,16 +13,24 @@ from unittest import mock
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 from lonlib.basin_hopping import Trial
 from lonlib.claims import (
-    NOT_REPRODUCED,
+    CONFIDENCE,
+    CONTRADICTED,
+    INCONCLUSIVE,
     NOT_TESTABLE,
     REPRODUCED,
+    bootstrap_typical_peaks,
+    claim_d_curve,
     claims_from_trials,
+    clopper_pearson,
     paper_claims,
     peaks_beside_paper,
+    typical_peaks,
 )
+from lonlib.claims_power import power_table
 from lonlib.claims_report import README_BEGIN, README_END, claims_markdown, markdown_table
 from lonlib.effect_size import bootstrap_delta_ci, cliffs_delta, compare_greater
 from lonlib.experiment import ExperimentConfig
@@ -34,21 +43,32 @@ REPO = Path(__file__).resolve().parent.parent
 
 # Sinks of the paper's Fig. 4 at p = 1e-4: five levels, the two lowest the strongest; the
 # runs ending at 0.72 pass 0.55 and none stops in [0.6, 0.7).
-PAPER_LIKE = [(0.22,)] * 10 + [(0.32,)] * 8 + [(0.46,)] * 4 + [(0.55,)] * 4 + [(0.55, 0.72)] * 4
+PAPER_LIKE = [(0.22,)] * 20 + [(0.32,)] * 16 + [(0.46,)] * 4 + [(0.55,)] * 4 + [(0.55, 0.72)] * 4
 WORSE = [(0.22,)] * 20 + [(0.32,)] * 10  # p = 1e-3: lower bests
+FEATURES = ("upright_share_0", "upright_share_1", "turns_0", "turns_1", "phase", "cart_range")
 
 
-def write_experiment(folder: Path, runs: dict[float, list[tuple[float, ...]]], labels="run"):
+def descriptor(key: int) -> dict:
+    """Behaviour columns drawn from a generator seeded with ``key``: two keys give
+    behaviours apart (in six standardised features), one key the same behaviour."""
+    values = np.random.default_rng(key).uniform(0, 1, len(FEATURES))
+    columns = {f"b_{name}": float(v) for name, v in zip(FEATURES, values, strict=True)}
+    return columns | {"b_cart_speed": 1.0, "b_end_step": 2000, "b_nominal_steps": 2000}
+
+
+def write_experiment(folder: Path, runs, labels="run", descriptors=None):
     """An experiment folder as lonlib.store writes it: per p, one run per chain of accepted
     fitness levels after a start at a fitness unique to the run, then two rejected trials.
     ``labels``: ``"run"`` (a behaviour label unique to each run), ``"level"`` (one label per
-    fitness level, shared across runs) or None (no behaviour columns). Files are written
-    atomically as in an experiment, without flushing them to disk (a test's speed)."""
+    fitness level, shared across runs) or None (no label). ``descriptors``: None (no
+    behaviour columns), ``"scattered"`` (every optimum its own behaviour) or ``"level"``
+    (one behaviour per fitness level, shared across runs). Files are written atomically as
+    in an experiment, without flushing them to disk (a test's speed)."""
     with mock.patch.object(os, "fsync"):
-        return _write_experiment(folder, runs, labels)
+        return _write_experiment(folder, runs, labels, descriptors)
 
 
-def _write_experiment(folder: Path, runs: dict[float, list[tuple[float, ...]]], labels: str | None):
+def _write_experiment(folder: Path, runs, labels, descriptors):
     config = ExperimentConfig(name="synthetic", perturbations=tuple(runs) or (1e-4,), runs=1)
     folder.mkdir(parents=True, exist_ok=True)
     write_json(folder / "manifest.json", {"experiment": "synthetic", "config": config.to_dict()})
@@ -60,6 +80,9 @@ def _write_experiment(folder: Path, runs: dict[float, list[tuple[float, ...]]], 
                 accepted = fitness >= best
                 label = {"run": f"run {run}", "level": f"level {fitness:.2f}", None: None}[labels]
                 behaviour = {} if label is None else {"label": label}
+                key = {"scattered": 1000 * run + index, "level": round(fitness * 1e4)}
+                if descriptors:
+                    behaviour |= descriptor(key[descriptors])
                 trials.append(
                     Trial(index, incumbent, fitness, accepted, 0.0, 0, behaviour=behaviour)
                 )
@@ -76,7 +99,9 @@ def verdicts(table: pd.DataFrame) -> dict[str, str]:
 @pytest.fixture(scope="module")
 def paper_like(tmp_path_factory):
     return write_experiment(
-        tmp_path_factory.mktemp("paper") / "exp", {1e-3: WORSE, 1e-4: PAPER_LIKE}
+        tmp_path_factory.mktemp("paper") / "exp",
+        {1e-3: WORSE, 1e-4: PAPER_LIKE},
+        descriptors="scattered",
     )
 
 
@@ -85,99 +110,203 @@ def test_a_paper_like_experiment_reproduces_every_claim(paper_like):
     assert list(table["claim"]) == ["a", "b", "c", "d", "e"]
     assert set(verdicts(table).values()) == {REPRODUCED}, table[["claim", "evidence"]]
     row = table.set_index("claim")
-    assert row.loc["a", "statistic"] == 5  # five typical peaks
+    assert row.loc["a", "statistic"] == 5 and row.loc["a", "ci_low"] >= 3  # five typical peaks
     assert row.loc["a", "p"] == 1e-4  # Figs. 3-5 are at p = 1e-4
-    assert row.loc["b", "statistic"] == 8  # weakest low peak (0.32) vs strongest other (4)
-    assert row.loc["b", "effect"] == pytest.approx(2.0)
+    assert row.loc["b", "statistic"] == 16  # weakest low peak (0.32) vs strongest other (4)
+    assert row.loc["b", "effect"] == 4.0
+    low, _ = clopper_pearson(16, 20, CONFIDENCE)
+    assert row.loc["b", "ci_low"] == pytest.approx(low / (1 - low)) and low > 0.5
     assert row.loc["c", "p_value"] < 0.01 and row.loc["c", "ci_low"] > 0
-    assert row.loc["c", "effect"] == pytest.approx(420 / 900)  # Cliff's delta by hand
-    assert row.loc["d", "effect"] == 0.0
+    assert row.loc["c", "effect"] == pytest.approx(480 / 1440)  # Cliff's delta by hand
+    assert row.loc["d", "effect"] == 0.0 and row.loc["d", "n"] == 100  # 48 starts + 52
     assert row.loc["e", "statistic"] == 0 and row.loc["e", "n"] == 12
     assert row.loc["e", "p_value"] == pytest.approx((2 / 3) ** 12)
+    assert row.loc["e", "ci_high"] < 1 and row.loc["e", "threshold"] == 1
     assert "Mann-Whitney" in row.loc["c", "evidence"] and "CI [" in row.loc["c", "evidence"]
+    assert list(row["direction"]) == [">= 3", "> 1", "> 0", "<= 0.05", "< 1"]
 
 
 def test_a_flat_quick_sized_experiment_is_not_testable(tmp_path):
-    flat = write_experiment(tmp_path / "flat", {1e-3: [(0.0,)] * 4, 1e-4: [(0.0,)] * 4}, None)
+    flat = write_experiment(tmp_path / "flat", {1e-3: [(0.0,)] * 3, 1e-4: [(0.0,)] * 3}, None)
     table = paper_claims(flat).set_index("claim")
     assert set(table["verdict"]) == {NOT_TESTABLE}
     assert "fewer than 10" in table.loc["a", "evidence"]
-    assert "4 runs at p = 1e-4" in table.loc["c", "evidence"]
-    assert "no behaviour labels" in table.loc["d", "evidence"]
+    assert "3 runs at p = 1e-4" in table.loc["c", "evidence"]
+    assert "no behaviour descriptors" in table.loc["d", "evidence"]
 
 
-def test_claim_a_needs_several_typical_levels(tmp_path):
-    # three stray sinks are detected peaks, but one sink each: no typical optimum
-    one_level = [(0.40,)] * 12 + [(0.10,), (0.70,), (0.90,)]
-    table = paper_claims(write_experiment(tmp_path / "x", {1e-4: one_level}))
-    row = table.set_index("claim").loc["a"]
-    assert row["verdict"] == NOT_REPRODUCED and row["statistic"] == 1
-    assert table.set_index("claim").loc["b", "verdict"] == NOT_TESTABLE  # one typical peak
-    few_levels = [(0.40,)] * 15 + [(0.60,)] * 15
-    row = paper_claims(write_experiment(tmp_path / "y", {1e-4: few_levels})).iloc[0]
-    assert row["verdict"] == NOT_TESTABLE and "2 distinct fitness" in row["evidence"]
+# Per case: runs per p, the descriptors, and the verdict each claim must reach (claims not
+# named are not checked). Every claim reaches each of the four verdicts in some case.
+FIVE_EVEN = [(0.22,)] * 8 + [(0.32,)] * 8 + [(0.46,)] * 6 + [(0.55,)] * 6 + [(0.72,)] * 6
+LEVEL_MEETINGS = [(round(0.30 + 0.05 * (run % 10), 2),) for run in range(20)]
+VERDICT_CASES = {
+    "two sink levels, the high one strong": (
+        {1e-4: [(0.40,)] * 15 + [(0.60,)] * 15},
+        None,
+        {"a": CONTRADICTED},
+    ),
+    "a weak third level": (
+        {1e-4: [(0.22,)] * 10 + [(0.46,)] * 10 + [(0.72,)] * 2},
+        None,
+        {"a": INCONCLUSIVE},
+    ),
+    "nine sinks": (
+        {1e-4: [(0.22,)] * 5 + [(0.46,)] * 4},
+        None,
+        {"a": NOT_TESTABLE, "b": NOT_TESTABLE},
+    ),
+    "the low basin weak": (
+        {1e-4: [(0.22,)] * 3 + [(0.72,)] * 20},
+        None,
+        {"a": CONTRADICTED, "b": CONTRADICTED},
+    ),
+    "the low basin half as strong": (  # 10 of 30: the 90 % upper end is 0.4994
+        {1e-4: [(0.22,)] * 10 + [(0.72,)] * 20},
+        None,
+        {"b": CONTRADICTED},
+    ),
+    "five even basins": ({1e-4: FIVE_EVEN}, None, {"a": REPRODUCED, "b": INCONCLUSIVE}),
+    "one typical level and strays": (
+        {1e-4: [(0.40,)] * 12 + [(0.10,), (0.70,), (0.90,)]},
+        None,
+        {"b": NOT_TESTABLE},
+    ),
+    "1e-3 better": ({1e-3: PAPER_LIKE, 1e-4: WORSE}, None, {"c": CONTRADICTED}),
+    "no difference between p": ({1e-3: WORSE, 1e-4: WORSE}, None, {"c": INCONCLUSIVE}),
+    "one p": ({1e-4: PAPER_LIKE}, None, {"c": NOT_TESTABLE}),
+    "three runs at 1e-3": ({1e-3: WORSE[:3], 1e-4: PAPER_LIKE}, None, {"c": NOT_TESTABLE}),
+    "runs meet at shared behaviours": ({1e-4: LEVEL_MEETINGS}, "level", {"d": CONTRADICTED}),
+    "a few runs meet": ({1e-4: PAPER_LIKE}, "level", {"d": INCONCLUSIVE}),
+    "no meeting, few nodes": ({1e-4: [(0.22,), (0.46,)]}, "scattered", {"d": INCONCLUSIVE}),
+    "no descriptors": ({1e-4: PAPER_LIKE}, None, {"d": NOT_TESTABLE}),
+    "optima fill 0.6-0.7": (
+        {1e-4: [(0.55, 0.65, 0.72)] * 6 + [(0.65,)] * 12},
+        None,
+        {"e": CONTRADICTED},
+    ),
+    "a shallow dip": (  # 7 of 30: the 90 % upper end is 0.39
+        {1e-4: [(0.55,)] * 12 + [(0.65,)] * 7 + [(0.75,)] * 11},
+        None,
+        {"e": INCONCLUSIVE},
+    ),
+    "few optima in 0.5-0.8": ({1e-4: [(0.22,)] * 25 + [(0.55,)] * 3}, None, {"e": NOT_TESTABLE}),
+}
 
 
-def test_claim_b_fails_when_the_high_basins_are_stronger(tmp_path):
-    high = [(0.22,)] * 3 + [(0.32,)] * 3 + [(0.46,)] * 4 + [(0.55,)] * 8 + [(0.72,)] * 10
-    table = paper_claims(write_experiment(tmp_path / "x", {1e-4: high})).set_index("claim")
-    assert table.loc["a", "verdict"] == REPRODUCED
-    assert table.loc["b", "verdict"] == NOT_REPRODUCED
-    assert table.loc["b", "statistic"] == 3 and table.loc["b", "effect"] == pytest.approx(0.3)
-    # one low peak short of beating the others is enough to fail
-    close = [(0.22,)] * 10 + [(0.32,)] * 4 + [(0.46,)] * 4 + [(0.55,)] * 4 + [(0.72,)] * 3
-    table = paper_claims(write_experiment(tmp_path / "y", {1e-4: close})).set_index("claim")
-    assert table.loc["b", "verdict"] == NOT_REPRODUCED
+def test_every_claim_reaches_every_verdict_in_some_case():
+    reached = {pair for *_, want in VERDICT_CASES.values() for pair in want.items()}
+    for claim in "abcde":
+        for verdict in (CONTRADICTED, INCONCLUSIVE, NOT_TESTABLE):
+            assert (claim, verdict) in reached, (claim, verdict)
+
+
+@pytest.mark.parametrize("case", list(VERDICT_CASES))
+def test_each_verdict_comes_out_where_the_data_say_so(tmp_path, case):
+    runs, descriptors, want = VERDICT_CASES[case]
+    table = paper_claims(write_experiment(tmp_path / "x", runs, None, descriptors))
+    got = verdicts(table)
+    assert {claim: got[claim] for claim in want} == want, table[["claim", "evidence"]]
+    rows = table.set_index("claim")
+    for claim, verdict in want.items():
+        row = rows.loc[claim]
+        if verdict in (REPRODUCED, CONTRADICTED, INCONCLUSIVE):
+            assert row["ci_low"] <= row["ci_high"] and not math.isnan(row["n"])
+        else:
+            assert math.isnan(row["ci_low"]) and math.isnan(row["effect"])
+
+
+def test_the_verdicts_follow_the_interval_and_the_threshold(tmp_path):
+    two_levels = VERDICT_CASES["two sink levels, the high one strong"][0]
+    table = paper_claims(write_experiment(tmp_path / "x", two_levels))
+    a = table.set_index("claim").loc["a"]
+    assert (a["statistic"], a["ci_low"], a["ci_high"]) == (2, 2, 2)  # 2 levels can't make 3
+    low = paper_claims(write_experiment(tmp_path / "y", {1e-4: [(0.22,)] * 3 + [(0.72,)] * 20}))
+    b = low.set_index("claim").loc["b"]
+    assert b["statistic"] == 3 and b["effect"] == pytest.approx(3 / 20)
+    high = clopper_pearson(3, 23, CONFIDENCE)[1]
+    assert b["ci_high"] == pytest.approx(high / (1 - high)) and b["ci_high"] < 1
+    weak = paper_claims(write_experiment(tmp_path / "z", VERDICT_CASES["a weak third level"][0]))
+    a = weak.set_index("claim").loc["a"]
+    assert (a["statistic"], a["ci_low"], a["ci_high"]) == (3, 2, 3)
+
+
+def test_claim_b_adjusts_only_the_end_that_one_pair_can_decide(tmp_path):
+    # five even basins: 6 low x other pairs; the weakest low (8) against the strongest other
+    # (6); the upper end is Bonferroni-adjusted for the 6 pairs, the lower end is not
+    row = paper_claims(write_experiment(tmp_path / "x", {1e-4: FIVE_EVEN})).set_index("claim")
+    b = row.loc["b"]
+    low = clopper_pearson(8, 14, CONFIDENCE)[0]
+    high = clopper_pearson(8, 14, 1 - 2 * 0.05 / 6)[1]
+    assert b["ci_low"] == pytest.approx(low / (1 - low))
+    assert b["ci_high"] == pytest.approx(high / (1 - high))
+    assert b["p_value"] == pytest.approx(stats.binomtest(8, 14, 0.5, "greater").pvalue)
 
 
 def test_claim_c_points_from_1e_4_to_1e_3(tmp_path):
     swapped = write_experiment(tmp_path / "swapped", {1e-3: PAPER_LIKE, 1e-4: WORSE})
     row = paper_claims(swapped).set_index("claim").loc["c"]
-    assert row["verdict"] == NOT_REPRODUCED
-    assert row["p_value"] > 0.5 and row["effect"] == pytest.approx(-420 / 900)
+    assert row["verdict"] == CONTRADICTED
+    assert row["p_value"] > 0.5 and row["effect"] == pytest.approx(-480 / 1440)
     assert row["ci_high"] < 0
-    # significant one-sided, but the bootstrap interval of Cliff's delta reaches 0
-    borderline = write_experiment(
-        tmp_path / "borderline", {1e-3: [(0.32,)] * 3 + [(0.46,)] * 5, 1e-4: [(0.46,)] * 8}
+    # two runs of eight worse at 1e-3: p = 0.085 and the interval reaches 0: inconclusive
+    small = write_experiment(
+        tmp_path / "small", {1e-3: [(0.32,)] * 2 + [(0.46,)] * 6, 1e-4: [(0.46,)] * 8}
     )
-    row = paper_claims(borderline).set_index("claim").loc["c"]
-    assert row["p_value"] < 0.05 and row["ci_low"] <= 0 < row["effect"]
-    assert row["verdict"] == NOT_REPRODUCED
-    one_p = paper_claims(write_experiment(tmp_path / "one", {1e-4: PAPER_LIKE}))
-    row = one_p.set_index("claim").loc["c"]
-    assert row["verdict"] == NOT_TESTABLE and "stored: 0.0001" in row["evidence"]
-    few = write_experiment(tmp_path / "few", {1e-3: WORSE[:4], 1e-4: PAPER_LIKE})
-    assert paper_claims(few).set_index("claim").loc["c", "verdict"] == NOT_TESTABLE
+    row = paper_claims(small).set_index("claim").loc["c"]
+    assert row["p_value"] > 0.05 and row["ci_low"] <= 0 < row["effect"] == 0.25
+    assert row["verdict"] == INCONCLUSIVE
+    four = write_experiment(tmp_path / "four", {1e-3: WORSE[:4], 1e-4: PAPER_LIKE[-4:]})
+    assert paper_claims(four).set_index("claim").loc["c", "verdict"] == REPRODUCED
 
 
 def test_claim_c_is_deterministic_and_its_interval_depends_on_the_seed(paper_like):
     trials = read_experiment_trials(paper_like)
-    first = claims_from_trials(trials, resamples=300, seed=1).set_index("claim").loc["c"]
-    again = claims_from_trials(trials, resamples=300, seed=1).set_index("claim").loc["c"]
+    first = claims_from_trials(trials, resamples=300, seed=1).set_index("claim")
+    again = claims_from_trials(trials, resamples=300, seed=1).set_index("claim")
     other = claims_from_trials(trials, resamples=300, seed=2).set_index("claim").loc["c"]
-    assert (first["ci_low"], first["ci_high"]) == (again["ci_low"], again["ci_high"])
+    pd.testing.assert_frame_equal(first, again)
+    first = first.loc["c"]
     assert (first["ci_low"], first["ci_high"]) != (other["ci_low"], other["ci_high"])
     assert first["p_value"] == other["p_value"]
 
 
-def test_claim_d_counts_runs_meeting_in_the_behavioural_lon(tmp_path):
-    shared = write_experiment(tmp_path / "shared", {1e-4: PAPER_LIKE}, labels="level")
-    row = paper_claims(shared).set_index("claim").loc["d"]
-    # 30 distinct starts and one node per level: 0.22 to 0.55 reached from several starts,
-    # 0.72 only from the one 0.55 node
-    assert row["verdict"] == NOT_REPRODUCED
-    assert row["n"] == 35 and row["statistic"] == 4 and row["effect"] == pytest.approx(4 / 35)
-    unlabelled = write_experiment(tmp_path / "none", {1e-4: PAPER_LIKE}, labels=None)
-    assert paper_claims(unlabelled).set_index("claim").loc["d", "verdict"] == NOT_TESTABLE
+def test_the_bootstrap_counts_typical_peaks_as_typical_peaks_does():
+    rng = np.random.default_rng(3)
+    levels = rng.choice([0.0, 0.22, 0.3, 0.46, 0.55, 0.72, 0.9], 40)
+    sinks = np.round(levels + rng.normal(0, 0.01, 40), 3).clip(0, 1)
+    counts = bootstrap_typical_peaks(sinks, 50, 100, seed=5)
+    distinct, weight = np.unique(sinks, return_counts=True)
+    draws = np.random.default_rng(5).multinomial(40, weight / 40, 100)
+    by_hand = [typical_peaks(np.repeat(distinct, draw), 50)["typical"].sum() for draw in draws]
+    assert list(counts) == by_hand and len(set(by_hand)) > 1
 
 
-def test_claim_e_fails_when_optima_fill_0_6_to_0_7(tmp_path):
-    filled = [(0.22,)] * 10 + [(0.55, 0.65, 0.72)] * 6 + [(0.65,)] * 6
-    row = paper_claims(write_experiment(tmp_path / "x", {1e-4: filled})).set_index("claim").loc["e"]
-    assert row["verdict"] == NOT_REPRODUCED and row["statistic"] == 12 and row["n"] == 24
-    sparse = [(0.22,)] * 25 + [(0.55,)] * 3
-    row = paper_claims(write_experiment(tmp_path / "y", {1e-4: sparse})).set_index("claim").loc["e"]
-    assert row["verdict"] == NOT_TESTABLE and "fewer than 10 optima in 0.5-0.8" in row["evidence"]
+def test_clopper_pearson_inverts_the_exact_binomial_test():
+    for k, n in ((0, 12), (3, 12), (12, 12), (8, 14)):
+        low, high = clopper_pearson(k, n, 0.9)
+        assert 0 <= low <= k / n <= high <= 1
+        if k < n:  # the upper end: where the one-sided test of "share < high" gives 0.05
+            assert stats.binom.cdf(k, n, high) == pytest.approx(0.05)
+        if k > 0:
+            assert stats.binom.sf(k - 1, n, low) == pytest.approx(0.05)
+    assert clopper_pearson(0, 12, 0.9)[0] == 0 and clopper_pearson(12, 12, 0.9)[1] == 1
+
+
+def test_claim_d_counts_runs_meeting_in_behaviour_space(tmp_path):
+    meet = write_experiment(tmp_path / "meet", {1e-4: LEVEL_MEETINGS}, "level", "level")
+    row = paper_claims(meet).set_index("claim").loc["d"]
+    # 20 scattered starts, 10 shared levels each reached from two starts
+    assert (row["n"], row["statistic"]) == (30, 10) and row["effect"] == pytest.approx(1 / 3)
+    assert row["ci_low"] > 0.05 and row["p_value"] < 0.05
+    assert "label level (same label and equal fitness merged): 10 of 30 nodes" in row["evidence"]
+    few = write_experiment(tmp_path / "few", {1e-4: [(0.22,), (0.46,)]}, None, "scattered")
+    row = paper_claims(few).set_index("claim").loc["d"]
+    assert (row["n"], row["statistic"], row["verdict"]) == (4, 0, INCONCLUSIVE)
+    curve = claim_d_curve(read_experiment_trials(meet))
+    assert list(curve["epsilon"]) == [round(0.1 * k, 1) for k in range(1, 21)]
+    assert curve.loc[curve["epsilon"] == 0.5, "share"].item() == pytest.approx(1 / 3)
+    assert (curve["ci_low"] <= curve["share"]).all() and (curve["share"] <= curve["ci_high"]).all()
+    assert claim_d_curve(read_experiment_trials(few)).shape[0] == 20
 
 
 def test_cliffs_delta_and_the_one_sided_test():
@@ -200,31 +329,42 @@ def test_cliffs_delta_and_the_one_sided_test():
 
 def test_markdown_rendering(paper_like):
     trials = read_experiment_trials(paper_like)
-    text = claims_markdown(claims_from_trials(trials), peaks_beside_paper(trials))
+    claims = claims_from_trials(trials)
+    text = claims_markdown(claims, peaks_beside_paper(trials), power_table(), claim_d_curve(trials))
     lines = text.splitlines()
-    assert lines[0] == "| claim | the paper says | p | evidence | verdict |"
-    assert lines[1] == "|---|---|---|---|---|"
+    assert lines[0] == (
+        "| claim | the paper says | p | n | statistic | effect [90 % interval] | evidence "
+        "| verdict |"
+    )
+    assert lines[1] == "|---|---|---|---|---|---|---|---|"
     rows = [line for line in lines[2:7]]
     assert [r.split(" | ")[0] for r in rows] == ["| a", "| b", "| c", "| d", "| e"]
     assert all(r.endswith("| **reproduced** |") for r in rows)
-    assert "| c | “the smaller perturbation (1e-4)" in text and "| 1e-4 vs 1e-3 |" in text
-    assert "sink histogram (Fig. 4, 30 sinks) and the optima histogram (Fig. 5, " in text
+    assert "| c | “the smaller perturbation (1e-4)" in text and "| 1e-4 vs 1e-3 | 30 |" in text
+    assert "| Mann-Whitney U = " in text and "Cliff's delta: 0.3333 [" in text
+    assert "; paper: > 0 |" in text and "typical peaks: 5 [" in text
+    assert "sink histogram (Fig. 4, 48 sinks) and the optima histogram (Fig. 5, " in text
     peaks = lines[
         lines.index(
             "| paper peak | nearest sinks peak | distance (sinks) "
             "| nearest optima peak | distance (optima) |"
         ) :
     ]
-    assert [r.split(" | ")[0] for r in peaks[2:]] == [
+    assert [r.split(" | ")[0] for r in peaks[2:7]] == [
         "| 0.22",
         "| 0.32",
         "| 0.46",
         "| 0.55",
         "| 0.72",
     ]
+    assert "| p | ε = 0.1 | ε = 0.3 | ε = 0.5 | ε = 0.7 | ε = 1 | ε = 1.5 | ε = 2 |" in lines
+    assert "| claim | smallest effect of interest | power from | needed for 80 % power" in text
+    assert "| c | Cliff's delta 0.47 (large, Romano et al. 2006) | formula (Noether 1987) |" in text
     assert markdown_table(pd.DataFrame({"x": ["a|b"], "y": [float("nan")]})) == (
         "| x | y |\n|---|---|\n| a\\|b |  |"
     )
+    plain = claims_markdown(claims)
+    assert "ε = 0.5" not in plain and "smallest effect" not in plain
 
 
 def hashes(folder: Path) -> dict[str, str]:
@@ -240,7 +380,9 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
 ):
     from lonlib.cli import main
 
-    folder = write_experiment(tmp_path / "exp", {1e-3: WORSE[:6], 1e-4: PAPER_LIKE[::3]})
+    folder = write_experiment(
+        tmp_path / "exp", {1e-3: WORSE[:6], 1e-4: PAPER_LIKE[::3]}, descriptors="level"
+    )
     before = hashes(folder)
     readme = tmp_path / "README.md"
     readme.write_text(
@@ -251,12 +393,21 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
     after = hashes(folder)
     assert {k: v for k, v in after.items() if not k.startswith("figures/")} == before
     figures = folder / "figures"
-    for name in ("fig2_optima_boxplot.png", "fig4_sinks_p=0.0001.png", "peaks.csv", "claims.md"):
+    for name in (
+        "fig2_optima_boxplot.png",
+        "fig4_sinks_p=0.0001.png",
+        "peaks.csv",
+        "claims.md",
+        "claim_d_curve.png",
+    ):
         assert (figures / name).stat().st_size > 0, name
     claims = pd.read_csv(figures / "claims.csv")
     assert list(claims["claim"]) == ["a", "b", "c", "d", "e"]
     trials = read_experiment_trials(folder)
-    expected = claims_markdown(claims_from_trials(trials), peaks_beside_paper(trials))
+    curve, power = claim_d_curve(trials), power_table()
+    pd.testing.assert_frame_equal(pd.read_csv(figures / "claim_d_curve.csv"), curve)
+    pd.testing.assert_frame_equal(pd.read_csv(figures / "power.csv"), power)
+    expected = claims_markdown(claims_from_trials(trials), peaks_beside_paper(trials), power, curve)
     assert (figures / "claims.md").read_text() == expected
     pasted = readme.read_text()
     summary = summary_markdown(experiment_summary(folder))

@@ -11,6 +11,7 @@ from mpl_toolkits.mplot3d.art3d import Path3DCollection  # noqa: E402
 from lonlib.lon import build_lon  # noqa: E402
 from lonlib.peaks import PAPER_PEAKS, compare_with_paper, detect_peaks  # noqa: E402
 from lonlib.plots import (  # noqa: E402
+    claim_d_curve_plot,
     fitness_histogram,
     lon_3d,
     lon_3d_html,
@@ -78,6 +79,27 @@ def test_sensitivity_has_a_panel_per_metric():
     )
     fig = sensitivity(metrics)
     assert len(fig.axes) == 6 and fig.axes[0].get_xscale() == "log"
+
+
+def test_claim_d_curve_has_a_line_per_p_and_marks_the_preregistered_epsilon():
+    import pandas as pd
+
+    curve = pd.DataFrame(
+        {
+            "p": [1e-4] * 3 + [1e-3] * 3,
+            "epsilon": [0.1, 0.5, 1.0] * 2,
+            "nodes": [20, 18, 15, 21, 21, 19],
+            "share": [0.0, 0.05, 0.2, 0.0, 0.0, 0.1],
+            "ci_low": [0.0, 0.003, 0.06, 0.0, 0.0, 0.02],
+            "ci_high": [0.14, 0.24, 0.43, 0.13, 0.13, 0.30],
+        }
+    )
+    fig = claim_d_curve_plot(curve, epsilon=0.5, max_share=0.05)
+    ax = fig.axes[0]
+    labels = [line.get_label() for line in ax.lines]
+    assert labels == ["p = 0.0001", "p = 0.001", "epsilon = 0.5", "sparse: <= 0.05"]
+    assert list(ax.lines[0].get_ydata()) == [0.0, 0.05, 0.2]
+    assert list(ax.lines[2].get_xdata()) == [0.5, 0.5] and len(ax.collections) == 2
 
 
 def test_figures_colour_and_stack_by_behaviour_label():
