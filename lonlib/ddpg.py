@@ -60,6 +60,7 @@ from lonlib.plain_state import (
     plain_int,
     plain_list,
     plain_str,
+    short_repr,
 )
 from lonlib.progress import progress_bar
 from lonlib.random_streams import (
@@ -883,7 +884,7 @@ def _tag_from_plain(value: Any, name: str) -> Any:
         return tuple(value)
     if isinstance(value, _SCALARS):
         return value
-    raise StateLayoutError(f"{name} must be plain data or a list of it, got {value!r}")
+    raise StateLayoutError(f"{name} must be plain data or a list of it, got {short_repr(value)}")
 
 
 def _search_to_plain(search: _Search) -> dict[str, Any]:

@@ -44,7 +44,12 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
 from lonlib.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
-from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints, remove_inflight
+from lonlib.inflight import (
+    checkpoint_lock_path,
+    inflight_checkpoints,
+    remove_inflight,
+    scan_inflight,
+)
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep
 from lonlib.lockstep_workers import run_lockstep_processes
@@ -177,9 +182,16 @@ def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]
 
 def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> None:
     """Remove the in-flight checkpoints (:mod:`lonlib.inflight`) all of whose runs have
-    ended since (they went on without them: nothing in them can be resumed). A checkpoint
-    whose runs another process holds is left to it."""
-    for checkpoint in inflight_checkpoints(out):
+    ended since (they went on without them: nothing in them can be resumed), and those
+    whose metadata is refused (truncated, planted: their runs continue from their stored
+    trials). A checkpoint whose runs another process holds is left to it."""
+    checkpoints, refused = scan_inflight(out)
+    for meta, reason in refused:
+        with hold_runs(out, [], [checkpoint_lock_path(meta)]) as held:
+            if held:
+                log.warning("%s: refused in-flight checkpoint removed (%s)", meta, reason)
+                remove_inflight(meta)
+    for checkpoint in checkpoints:
         if not set(checkpoint.runs).isdisjoint(todo):
             continue
         with hold_runs(out, checkpoint.runs, [checkpoint_lock_path(checkpoint)]) as held:

@@ -55,7 +55,14 @@ import torch
 
 from lonlib.ddpg import DDPGConfig, SlotTrainer
 from lonlib.pendulum import PendulumConfig
-from lonlib.plain_state import StateLayoutError, plain_dict, plain_float, plain_str
+from lonlib.plain_state import (
+    plain_dict,
+    plain_float,
+    plain_int,
+    plain_list,
+    plain_str,
+    short_repr,
+)
 from lonlib.store import atomic_write
 
 log = logging.getLogger(__name__)
@@ -111,33 +118,59 @@ def inflight_checkpoints(out: str | Path) -> list[InflightCheckpoint]:
     """The committed checkpoints of experiment ``out``, most searches first. Metadata that
     cannot be read or does not add up is reported and skipped; so is a checkpoint of another
     :data:`FORMAT` (once per process), which is never read further."""
-    found = []
+    found, refused = scan_inflight(out)
+    for meta, reason in refused:
+        log.warning("%s: refused in-flight checkpoint skipped (%s)", meta, reason)
+    return found
+
+
+def scan_inflight(out: str | Path) -> tuple[list[InflightCheckpoint], list[tuple[Path, str]]]:
+    """The committed checkpoints of experiment ``out`` (most searches first), and the
+    metadata files refused, with why (their content: truncated, planted, not adding up). A
+    file that cannot be read now is reported and skipped, not refused; so is a checkpoint of
+    another :data:`FORMAT` (once per process). Never raises for a file's content."""
+    found, refused = [], []
     for meta in sorted(inflight_folder(out).glob("*.json")):
         try:
-            payload = json.loads(meta.read_text())
+            data = meta.read_bytes()  # an error here is the file system's, past it the content's
+        except OSError as error:
+            log.warning("%s: unreadable in-flight checkpoint skipped (%s)", meta, error)
+            continue
+        try:
+            payload = json.loads(data)
             if not isinstance(payload, dict):
                 raise ValueError("not a JSON object")
-            if payload.get("format") != FORMAT:
+            if type(payload.get("format")) is not int or payload["format"] != FORMAT:
                 _report_other_format(meta, payload.get("format"))
                 continue
             found.append(_listed(meta, payload))
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            log.warning("%s: unreadable in-flight checkpoint skipped (%s)", meta, error)
-    return sorted(found, key=lambda c: -len(c.runs))
+        except Exception as error:  # whatever the file holds: refused (RecursionError too)
+            refused.append((meta, _reason(error)))
+    return sorted(found, key=lambda c: -len(c.runs)), refused
+
+
+def _reason(error: BaseException) -> str:
+    """Why a file was refused, in a line (the error's type if its text says nothing)."""
+    text = str(error).splitlines()[0] if str(error) else ""
+    return text[:300] or type(error).__name__
 
 
 def _listed(meta: Path, payload: dict[str, Any]) -> InflightCheckpoint:
     """The checkpoint whose metadata ``meta`` holds ``payload`` (raises if it does not add
     up, or names a data file other than its own)."""
-    runs = tuple((float(p), int(run)) for p, run in payload["runs"])
-    trials = tuple(int(n) for n in payload["trials"])
-    steps = tuple(int(n) for n in payload["steps"])
+    runs = tuple(
+        _job(entry, f"runs[{i}]") for i, entry in enumerate(plain_list(payload["runs"], "runs"))
+    )
+    trials = tuple(plain_int(n, "trials", 0) for n in plain_list(payload["trials"], "trials"))
+    steps = tuple(plain_int(n, "steps", 0) for n in plain_list(payload["steps"], "steps"))
     if not len(runs) == len(trials) == len(steps):
         raise ValueError("runs, trials and steps of other lengths")
+    if len(set(runs)) != len(runs):
+        raise ValueError("a run is listed twice")
     write_id = plain_str(payload["write_id"], "write_id")
     data = f"{meta.stem}.{write_id}.pt"
     if payload["data"] != data:
-        raise ValueError(f"its data file must be {data}, not {payload['data']!r}")
+        raise ValueError(f"its data file must be {data}, not {short_repr(payload['data'])}")
     return InflightCheckpoint(
         metadata_path=meta,
         data_path=meta.parent / data,
@@ -145,8 +178,14 @@ def _listed(meta: Path, payload: dict[str, Any]) -> InflightCheckpoint:
         runs=runs,
         trials=trials,
         steps=steps,
-        saved=float(payload["saved"]),
+        saved=plain_float(payload["saved"], "saved", finite=True),
     )
+
+
+def _job(entry: Any, name: str) -> Job:
+    """A listed run ``[p, run]``: a finite p and a run number >= 0."""
+    p, run = plain_list(entry, name, 2)
+    return plain_float(p, f"{name} p", finite=True), plain_int(run, f"{name} run", 0)
 
 
 _reported: set[Path] = set()
@@ -165,7 +204,7 @@ def _report_other_format(meta: Path, found: Any) -> None:
         "minutes they had in flight. Delete %s.* (or, with no lockstep batch running, %s/) to "
         "silence this message",
         meta,
-        repr(found)[:40],
+        short_repr(found)[:40],
         kind,
         FORMAT,
         meta.with_suffix(""),
@@ -220,8 +259,8 @@ class StoredBatch:
         if they are missing or invalid)."""
         try:
             return SlotTrainer.checkpoint_configs(self.plain)
-        except StateLayoutError as error:
-            raise ValueError(f"{self.source}: refused, {error}") from None
+        except Exception as error:  # whatever the file holds is refused, never raised
+            raise ValueError(f"{self.source}: refused, {_reason(error)}") from None
 
     def trainer(self, device: str | None = None) -> SlotTrainer:
         """The batch, on ``device`` (default: where it was trained), its search clocks moved
@@ -229,8 +268,8 @@ class StoredBatch:
         first misfit) if anything in it does not fit a batch of its settings."""
         try:
             trainer = SlotTrainer.from_checkpoint(self.plain, self.tensors, device)
-        except (ValueError, TypeError, KeyError, IndexError, RuntimeError) as error:
-            raise ValueError(f"{self.source}: refused, {error}") from None
+        except Exception as error:  # whatever the file holds is refused, never raised
+            raise ValueError(f"{self.source}: refused, {_reason(error)}") from None
         trainer.resume_clocks(time.perf_counter() - self.clock)
         return trainer
 
@@ -243,19 +282,22 @@ def read_inflight(checkpoint: InflightCheckpoint) -> StoredBatch:
     they are not a pair of this format's files (truncated, planted, another format)."""
     meta = checkpoint.metadata_path
     try:
-        payload = plain_dict(json.loads(meta.read_text()), str(meta), METADATA_KEYS)
+        data = meta.read_bytes()  # an error here is the file system's, past it the content's
     except FileNotFoundError as error:
         raise ValueError(f"{meta}: missing") from error
     except OSError as error:
         raise CheckpointUnreadable(f"{meta}: {error}") from error
-    except ValueError as error:  # not JSON, or not the keys of this format
-        raise ValueError(f"{meta}: refused, {error}") from None
-    if payload["format"] != FORMAT or payload["write_id"] != checkpoint.write_id:
+    try:  # whatever the file holds is refused, never raised (RecursionError, OverflowError)
+        payload = plain_dict(json.loads(data), str(meta), METADATA_KEYS)
+        rewritten = payload["format"] != FORMAT or payload["write_id"] != checkpoint.write_id
+        clock = None if rewritten else plain_float(payload["clock"], "clock", finite=True)
+        trainer = payload["trainer"]
+        if not isinstance(trainer, dict):
+            raise ValueError("trainer must be a mapping")
+    except Exception as error:
+        raise ValueError(f"{meta}: refused, {_reason(error)}") from None
+    if rewritten:
         raise ValueError(f"{meta}: rewritten since it was listed")
-    clock = plain_float(payload["clock"], f"{meta}: clock")
-    trainer = payload["trainer"]
-    if not isinstance(trainer, dict):
-        raise ValueError(f"{meta}: refused, trainer must be a mapping")
     return StoredBatch(checkpoint.data_path, trainer, _read_tensors(checkpoint), clock)
 
 

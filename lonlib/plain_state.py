@@ -12,6 +12,7 @@ fit.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, TypeVar
 
 import numpy as np
@@ -68,30 +69,47 @@ class TensorReader:
 def plain_int(value: Any, name: str, low: int | None = None, high: int | None = None) -> int:
     """``value`` as an integer (not a bool) in ``[low, high]``."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise StateLayoutError(f"{name} must be an integer, got {value!r}")
+        raise StateLayoutError(f"{name} must be an integer, got {short_repr(value)}")
     if (low is not None and value < low) or (high is not None and value > high):
-        raise StateLayoutError(f"{name} must be in [{low}, {high}], got {value}")
+        raise StateLayoutError(f"{name} must be in [{low}, {high}], got {short_repr(value)}")
     return value
 
 
-def plain_float(value: Any, name: str) -> float:
-    """``value`` as a float (JSON numbers, ``NaN`` and ``Infinity`` included; not a bool)."""
+def plain_float(value: Any, name: str, finite: bool = False) -> float:
+    """``value`` as a float (JSON numbers, ``NaN`` and ``Infinity`` included unless
+    ``finite``; not a bool, nor an integer too large for a float)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise StateLayoutError(f"{name} must be a number, got {value!r}")
-    return float(value)
+        raise StateLayoutError(f"{name} must be a number, got {short_repr(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise StateLayoutError(f"{name} is too large for a float") from None
+    if finite and not math.isfinite(number):
+        raise StateLayoutError(f"{name} must be finite, got {number}")
+    return number
+
+
+def short_repr(value: Any) -> str:
+    """``repr(value)`` cut short, for messages: a hostile file's values can be huge (an
+    integer of thousands of digits has no ``repr``)."""
+    try:
+        text = repr(value)
+    except ValueError:
+        return f"{type(value).__name__} too large to show"
+    return text if len(text) <= 80 else f"{text[:77]}..."
 
 
 def plain_bool(value: Any, name: str) -> bool:
     """``value``, which must be a bool."""
     if not isinstance(value, bool):
-        raise StateLayoutError(f"{name} must be true or false, got {value!r}")
+        raise StateLayoutError(f"{name} must be true or false, got {short_repr(value)}")
     return value
 
 
 def plain_str(value: Any, name: str) -> str:
     """``value``, which must be text."""
     if not isinstance(value, str):
-        raise StateLayoutError(f"{name} must be text, got {value!r}")
+        raise StateLayoutError(f"{name} must be text, got {short_repr(value)}")
     return value
 
 
@@ -120,7 +138,7 @@ def config_from_plain(cls: type[T], value: Any, name: str) -> T:
     values = plain_dict(value, name, {f.name for f in dataclasses.fields(cls)})
     try:
         return cls(**values)
-    except (TypeError, ValueError) as error:
+    except (TypeError, ValueError, OverflowError) as error:
         raise StateLayoutError(f"{name}: {error}") from None
 
 

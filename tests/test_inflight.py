@@ -18,7 +18,7 @@ import torch
 
 import lonlib
 from lonlib.ddpg import SlotTrainer
-from lonlib.experiment import run_experiment
+from lonlib.experiment import run_experiment, run_status
 from lonlib.inflight import (
     FORMAT,
     inflight_checkpoints,
@@ -425,6 +425,82 @@ def test_a_planted_checkpoint_is_refused_by_a_resuming_experiment(
     want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
     pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
     assert not list((tmp_path / ".inflight").iterdir())
+
+
+# ------------------------------------------------------------------ crafted metadata
+
+DEEP = "[" * 100_000 + "]" * 100_000  # nested past any parser's recursion limit
+HUGE = 10**400  # an integer too large for a float
+
+
+def with_metadata(checkpoint, change) -> None:
+    """Rewrite ``checkpoint``'s metadata: ``change(meta)`` is the new mapping or text."""
+    meta = change(json.loads(checkpoint.metadata_path.read_text()))
+    checkpoint.metadata_path.write_text(meta if isinstance(meta, str) else json.dumps(meta))
+
+
+def with_search_value(meta: dict, **changes) -> dict:
+    return {**meta, "trainer": with_search(meta["trainer"], **changes)}
+
+
+JSON_CASES = {
+    "a huge p": (lambda m: {**m, "runs": [[HUGE, 0], *m["runs"][1:]]}, r"runs\[0\] p is too large"),
+    "a huge saved": (lambda m: {**m, "saved": HUGE}, "saved is too large for a float"),
+    "a huge clock": (lambda m: {**m, "clock": HUGE}, "clock is too large for a float"),
+    "a huge start time": (lambda m: with_search_value(m, started=HUGE), "started is too large"),
+    "a huge fitness": (lambda m: with_search_value(m, fitness=HUGE), "fitness is too large"),
+    "huge seconds": (lambda m: with_search_value(m, seconds=HUGE), "seconds is too large"),
+    "a huge best": (lambda m: with_search_value(m, best=[HUGE, 0.0]), "best is too large"),
+    "deep nesting": (lambda m: DEEP, "maximum recursion depth"),
+    "deep nesting inside": (
+        lambda m: json.dumps({**m, "trainer": 0}).replace('"trainer": 0', f'"trainer": {DEEP}'),
+        "maximum recursion depth",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", JSON_CASES)
+def test_crafted_metadata_is_refused_not_raised(copy_of, tmp_path, caplog, case):
+    """Numbers too large for a float and nesting past the parser's limit: refused with a
+    reason, when listed (every executor and ``lonlib status`` list checkpoints) or read."""
+    checkpoint, _, _ = copy_of
+    change, message = JSON_CASES[case]
+    with_metadata(checkpoint, change)
+    listed = inflight_checkpoints(tmp_path)
+    if listed:
+        with pytest.raises(ValueError, match=f"refused, .*{message}"):
+            load_inflight(*listed)
+    else:
+        assert re.search(f"refused in-flight checkpoint skipped .*{message}", caplog.text)
+
+
+@pytest.mark.parametrize("case", ["a huge p", "a huge start time", "deep nesting"])
+def test_crafted_metadata_is_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    change, message = JSON_CASES[case]
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, change))
+    assert re.search(f"in-flight checkpoint removed .*{message}", log)
+
+
+def resumed_despite(serial, tmp_path, monkeypatch, caplog, plant) -> str:
+    """A lockstep experiment killed mid-search, its checkpoint changed by ``plant``, then
+    resumed: it is refused (no traceback) and removed, the runs continue from their stored
+    trials to the uninterrupted results and nothing is created outside the experiment's
+    runs. The log."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    plant(checkpoint)
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_status(tmp_path)  # `lonlib status` lists the checkpoints too
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert "resumed" not in caplog.text and "Traceback" not in caplog.text
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert not list((tmp_path / ".inflight").iterdir())
+    folders = sorted(str(path.relative_to(tmp_path)) for path in tmp_path.glob("p=*/*"))
+    assert folders == ["p=0.001/run_0000", "p=0.001/run_0001"]
+    return caplog.text
 
 
 # ------------------------------------------------------------------ a format version
