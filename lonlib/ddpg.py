@@ -704,7 +704,8 @@ class SlotTrainer:
         trainer._configure(env_config, hp, k, hp.device if device is None else device)
         trainer._allocate_slots(k)
         for name in SLOT_ARRAYS:
-            setattr(trainer, name, reader.take_like(f"slots.{name}", getattr(trainer, name)))
+            array = reader.take_like(f"slots.{name}", getattr(trainer, name), finite=True)
+            setattr(trainer, name, array)
         trainer.loss_sum = reader.take_like("slots.loss_sum", trainer.loss_sum)
         trainer.learner = _learner_from_checkpoint(reader, trainer)
         obs_size, n = env_config.observation_size, trainer.n
@@ -718,7 +719,8 @@ class SlotTrainer:
             raise StateLayoutError(f"trainer.stream_seeds: {error}") from None
         trainer.sim = CoupledPendulums(env_config, k)
         for name in CoupledPendulums.STATE_ARRAYS:
-            setattr(trainer.sim, name, reader.take_like(f"sim.{name}", getattr(trainer.sim, name)))
+            array = reader.take_like(f"sim.{name}", getattr(trainer.sim, name), finite=True)
+            setattr(trainer.sim, name, array)
         trainer.sim.rng = generator_from_state(plain["sim_generator"], "trainer.sim_generator")
         trainer.searches, trainer.pending = _searches_from_checkpoint(plain, reader, trainer)
         trainer.judge_batch = plain_int(plain["judge_batch"], "trainer.judge_batch", 1)
@@ -984,7 +986,7 @@ def _searches_from_checkpoint(
     ]
     held = [slot for slot, entry in enumerate(fields) if entry is not None]
     arrays = {
-        name: reader.take_numpy(f"searches.{name}", (len(held), size), torch.float32)
+        name: reader.take_numpy(f"searches.{name}", (len(held), size), torch.float32, True)
         for name, size in (
             ("theta", a_size),
             ("omega", c_size),
@@ -1028,8 +1030,8 @@ def _pending_from_checkpoint(
     """The queued evaluations: each names a slot with a search and an episode of its
     history, and every search queues as many as its count says."""
     queue = plain_list(plain["pending"], "trainer.pending")
-    thetas = reader.take_numpy("pending.theta", (len(queue), a_size), torch.float32)
-    omegas = reader.take_numpy("pending.omega", (len(queue), c_size), torch.float32)
+    thetas = reader.take_numpy("pending.theta", (len(queue), a_size), torch.float32, True)
+    omegas = reader.take_numpy("pending.omega", (len(queue), c_size), torch.float32, True)
     pending = []
     for i, item in enumerate(queue):
         slot, index = plain_list(item, f"trainer.pending[{i}]", 2)
@@ -1051,9 +1053,13 @@ def _learner_from_checkpoint(reader: TensorReader, trainer: SlotTrainer) -> Any:
     k = len(trainer.busy)
     sizes = {"actor": trainer.a_spec.n_params, "critic": trainer.c_spec.n_params}
     arrays = {
-        name: reader.take_numpy(f"learner.{name}", (k, sizes[name.split("_")[0]]), torch.float32)
+        name: reader.take_numpy(
+            f"learner.{name}", (k, sizes[name.split("_")[0]]), torch.float32, finite=True
+        )
         for name in LEARNER_STATE
     }
+    if any((arrays[name] < 0).any() for name in ("actor_exp_avg_sq", "critic_exp_avg_sq")):
+        raise StateLayoutError("learner: negative Adam second moments")
     steps = reader.take_numpy("learner.adam_steps", (k,), torch.int64)
     if (steps < 0).any():
         raise StateLayoutError("learner.adam_steps: negative step counts")

@@ -317,12 +317,18 @@ def _read_tensors(checkpoint: InflightCheckpoint) -> dict[str, Any]:
             f"{path}: refused, not tensors and plain data ({_load_error(error)}); nothing "
             "in it was run"
         ) from None
-    if not (
-        isinstance(payload, dict)
-        and set(payload) == {"format", "write_id", "tensors"}
-        and payload["format"] == FORMAT
-        and payload["write_id"] == checkpoint.write_id
-    ):
+    try:  # values of any kind: a tensor's == is no bool, so compare kinds first
+        ours = (
+            type(payload) is dict
+            and set(payload) == {"format", "write_id", "tensors"}
+            and type(payload["format"]) is int
+            and payload["format"] == FORMAT
+            and type(payload["write_id"]) is str
+            and payload["write_id"] == checkpoint.write_id
+        )
+    except Exception:
+        ours = False
+    if not ours:
         raise ValueError(f"{path}: refused, not the data file its metadata describes")
     return payload["tensors"]
 

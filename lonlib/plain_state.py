@@ -34,8 +34,12 @@ class TensorReader:
         self._tensors = dict(tensors)
         self._where = where
 
-    def take(self, name: str, shape: tuple[int, ...], dtype: torch.dtype) -> torch.Tensor:
-        """The tensor ``name``, which must be a dense CPU tensor of ``shape`` and ``dtype``."""
+    def take(
+        self, name: str, shape: tuple[int, ...], dtype: torch.dtype, finite: bool = False
+    ) -> torch.Tensor:
+        """The tensor ``name``, which must be a plain dense contiguous CPU tensor (not a
+        ``Parameter`` nor requiring a gradient: in-place updates would fail) of ``shape``
+        and ``dtype``, and with ``finite`` hold no NaN or infinite value."""
         if name not in self._tensors:
             raise StateLayoutError(f"{self._where}: tensor {name!r} is missing")
         value = self._tensors.pop(name)
@@ -46,19 +50,33 @@ class TensorReader:
                 f"{self._where}: {name!r} is {value.dtype} {tuple(value.shape)}, "
                 f"expected {dtype} {tuple(shape)}"
             )
+        if (
+            type(value) is not torch.Tensor
+            or value.requires_grad
+            or not value.is_contiguous()
+            or value.device.type != "cpu"
+        ):
+            raise StateLayoutError(
+                f"{self._where}: {name!r} is not a plain tensor (a Parameter or another "
+                "kind, requiring a gradient, not contiguous or not on the CPU)"
+            )
+        if finite and dtype.is_floating_point and not bool(torch.isfinite(value).all()):
+            raise StateLayoutError(f"{self._where}: {name!r} holds NaN or infinite values")
         return value
 
-    def take_numpy(self, name: str, shape: tuple[int, ...], dtype: torch.dtype) -> np.ndarray:
+    def take_numpy(
+        self, name: str, shape: tuple[int, ...], dtype: torch.dtype, finite: bool = False
+    ) -> np.ndarray:
         """:meth:`take` as a numpy array of its own (not sharing the tensor's memory)."""
-        return self.take(name, shape, dtype).numpy().copy()
+        return self.take(name, shape, dtype, finite).numpy().copy()
 
-    def take_like(self, name: str, like: np.ndarray | torch.Tensor) -> Any:
+    def take_like(self, name: str, like: np.ndarray | torch.Tensor, finite: bool = False) -> Any:
         """The tensor ``name`` with ``like``'s shape and dtype, as ``like``'s kind: a numpy
-        array of its own, or a tensor on ``like``'s device."""
+        array of its own, or a tensor of its own on ``like``'s device."""
         if isinstance(like, np.ndarray):
             dtype = torch.from_numpy(np.empty(0, like.dtype)).dtype
-            return self.take_numpy(name, like.shape, dtype)
-        return self.take(name, tuple(like.shape), like.dtype).to(like.device)
+            return self.take_numpy(name, like.shape, dtype, finite)
+        return self.take(name, tuple(like.shape), like.dtype, finite).to(like.device, copy=True)
 
     def finish(self) -> None:
         """Refuse tensors nobody took (a layout this reader does not know)."""

@@ -323,7 +323,45 @@ TENSOR_CASES = {
         lambda t: shaped(t, "searches.history", t["searches.history"][:-1]),
         "'searches.history' is",
     ),
+    # in-place updates of a Parameter, a tensor requiring a gradient or one whose elements
+    # share memory fail (or write through) later
+    "a Parameter": (
+        lambda t: shaped(t, "slots.loss_sum", torch.nn.Parameter(t["slots.loss_sum"])),
+        "'slots.loss_sum' is not a plain tensor",
+    ),
+    "a tensor requiring a gradient": (
+        lambda t: shaped(t, "slots.loss_sum", t["slots.loss_sum"].clone().requires_grad_()),
+        "'slots.loss_sum' is not a plain tensor",
+    ),
+    "elements sharing memory": (
+        lambda t: shaped(t, "slots.loss_sum", torch.zeros(2, 1, dtype=torch.float64).expand(2, 3)),
+        "'slots.loss_sum' is not a plain tensor",
+    ),
+    # NaN where the computation never makes one: it would crash later (or score NaN)
+    "NaN in the simulator": (lambda t: nan_in(t, "sim.phi"), "'sim.phi' holds NaN"),
+    "NaN in an Actor": (lambda t: nan_in(t, "learner.actor"), "'learner.actor' holds NaN"),
+    "NaN in Adam's state": (
+        lambda t: nan_in(t, "learner.critic_exp_avg"),
+        "'learner.critic_exp_avg' holds NaN",
+    ),
+    "infinity in the replay buffer": (
+        lambda t: nan_in(t, "replay.rows", np.inf),
+        "'replay.rows' holds NaN or infinite",
+    ),
+    "NaN in an observation": (lambda t: nan_in(t, "slots.obs"), "'slots.obs' holds NaN"),
+    "NaN in a start": (lambda t: nan_in(t, "searches.theta"), "'searches.theta' holds NaN"),
+    "NaN in a queued policy": (lambda t: nan_in(t, "pending.omega"), "'pending.omega' holds"),
+    "a negative second moment": (
+        lambda t: shaped(t, "learner.actor_exp_avg_sq", -t["learner.actor_exp_avg_sq"] - 1),
+        "negative Adam second moments",
+    ),
 }
+
+
+def nan_in(tensors: dict, name: str, value: float = np.nan) -> dict:
+    changed = tensors[name].clone()
+    changed.view(-1)[-1] = value
+    return shaped(tensors, name, changed)
 
 
 @pytest.mark.parametrize("case", TENSOR_CASES)
@@ -389,6 +427,41 @@ def test_plain_data_of_a_wrong_layout_is_refused(copy_of, case):
     rewrite(checkpoint, trainer=change(plain))
     with pytest.raises(ValueError, match=message):
         load_inflight(checkpoint)
+
+
+def test_a_data_file_whose_format_is_a_tensor_is_refused(copy_of):
+    checkpoint, tensors, _ = copy_of
+    rewrite(
+        checkpoint,
+        payload={
+            "format": torch.tensor([3, 3]),
+            "write_id": checkpoint.write_id,
+            "tensors": tensors,
+        },
+    )
+    with pytest.raises(ValueError, match="not the data file its metadata describes"):
+        load_inflight(checkpoint)
+
+
+PLANTED_TENSORS = {
+    "a tensor as the format": lambda c, t: rewrite(
+        c, payload={"format": torch.tensor([FORMAT] * 2), "write_id": c.write_id, "tensors": t}
+    ),
+    "a Parameter": lambda c, t: rewrite(c, tensors=TENSOR_CASES["a Parameter"][0](t)),
+    "NaN in the simulator": lambda c, t: rewrite(c, tensors=nan_in(t, "sim.phi")),
+}
+
+
+@pytest.mark.parametrize("case", PLANTED_TENSORS)
+def test_planted_tensors_are_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    def plant(checkpoint):
+        tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
+        PLANTED_TENSORS[case](checkpoint, tensors)
+
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, plant)
+    assert "stale in-flight checkpoint removed" in log and "refused" in log
 
 
 def test_a_data_file_of_another_write_is_refused(copy_of):
