@@ -47,6 +47,7 @@ import json
 import logging
 import time
 import uuid
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -72,6 +73,8 @@ INFLIGHT_FOLDER = ".inflight"
 # (tests/test_inflight.py fails until the new layout is written down there).
 FORMAT = 3
 Job = tuple[float, int]
+# An experiment's runs: its perturbation strengths and its number of runs per strength.
+Plan = tuple[Collection[float], int]
 
 
 class CheckpointUnreadable(OSError):
@@ -114,21 +117,25 @@ def new_checkpoint_path(out: str | Path) -> Path:
     return inflight_folder(out) / f"{uuid.uuid4().hex[:12]}.json"
 
 
-def inflight_checkpoints(out: str | Path) -> list[InflightCheckpoint]:
+def inflight_checkpoints(out: str | Path, plan: Plan | None = None) -> list[InflightCheckpoint]:
     """The committed checkpoints of experiment ``out``, most searches first. Metadata that
-    cannot be read or does not add up is reported and skipped; so is a checkpoint of another
-    :data:`FORMAT` (once per process), which is never read further."""
-    found, refused = scan_inflight(out)
+    cannot be read or does not add up (with ``plan``, the experiment's runs: a run that is
+    not one of them) is reported and skipped; so is a checkpoint of another :data:`FORMAT`
+    (once per process), which is never read further."""
+    found, refused = scan_inflight(out, plan)
     for meta, reason in refused:
         log.warning("%s: refused in-flight checkpoint skipped (%s)", meta, reason)
     return found
 
 
-def scan_inflight(out: str | Path) -> tuple[list[InflightCheckpoint], list[tuple[Path, str]]]:
+def scan_inflight(
+    out: str | Path, plan: Plan | None = None
+) -> tuple[list[InflightCheckpoint], list[tuple[Path, str]]]:
     """The committed checkpoints of experiment ``out`` (most searches first), and the
-    metadata files refused, with why (their content: truncated, planted, not adding up). A
-    file that cannot be read now is reported and skipped, not refused; so is a checkpoint of
-    another :data:`FORMAT` (once per process). Never raises for a file's content."""
+    metadata files refused, with why (their content: truncated, planted, not adding up,
+    with ``plan`` listing a run that is not one of the experiment's). A file that cannot be
+    read now is reported and skipped, not refused; so is a checkpoint of another
+    :data:`FORMAT` (once per process). Never raises for a file's content."""
     found, refused = [], []
     for meta in sorted(inflight_folder(out).glob("*.json")):
         try:
@@ -143,7 +150,7 @@ def scan_inflight(out: str | Path) -> tuple[list[InflightCheckpoint], list[tuple
             if type(payload.get("format")) is not int or payload["format"] != FORMAT:
                 _report_other_format(meta, payload.get("format"))
                 continue
-            found.append(_listed(meta, payload))
+            found.append(_listed(meta, payload, plan))
         except Exception as error:  # whatever the file holds: refused (RecursionError too)
             refused.append((meta, _reason(error)))
     return sorted(found, key=lambda c: -len(c.runs)), refused
@@ -155,9 +162,9 @@ def _reason(error: BaseException) -> str:
     return text[:300] or type(error).__name__
 
 
-def _listed(meta: Path, payload: dict[str, Any]) -> InflightCheckpoint:
+def _listed(meta: Path, payload: dict[str, Any], plan: Plan | None) -> InflightCheckpoint:
     """The checkpoint whose metadata ``meta`` holds ``payload`` (raises if it does not add
-    up, or names a data file other than its own)."""
+    up, names a data file other than its own, or a run not of ``plan``)."""
     runs = tuple(
         _job(entry, f"runs[{i}]") for i, entry in enumerate(plain_list(payload["runs"], "runs"))
     )
@@ -167,6 +174,11 @@ def _listed(meta: Path, payload: dict[str, Any]) -> InflightCheckpoint:
         raise ValueError("runs, trials and steps of other lengths")
     if len(set(runs)) != len(runs):
         raise ValueError("a run is listed twice")
+    if plan is not None:
+        perturbations, count = plan
+        for p, run in runs:
+            if p not in perturbations or run >= count:
+                raise ValueError(f"run {run} of p={p} is not one of this experiment's")
     write_id = plain_str(payload["write_id"], "write_id")
     data = f"{meta.stem}.{write_id}.pt"
     if payload["data"] != data:
@@ -253,6 +265,8 @@ class StoredBatch:
     plain: dict[str, Any]  # SlotTrainer.to_checkpoint's plain data
     tensors: dict[str, Any]  # and its tensors
     clock: float  # time.perf_counter() at the write
+    runs: tuple[Job, ...]  # the runs its metadata lists, the tags of its busy slots
+    steps: tuple[int, ...]  # and their searches' env steps
 
     def settings(self) -> tuple[PendulumConfig, DDPGConfig]:
         """The environment and DDPG settings the batch was trained with (``ValueError``
@@ -268,10 +282,23 @@ class StoredBatch:
         first misfit) if anything in it does not fit a batch of its settings."""
         try:
             trainer = SlotTrainer.from_checkpoint(self.plain, self.tensors, device)
+            self._check_runs(trainer)
         except Exception as error:  # whatever the file holds is refused, never raised
             raise ValueError(f"{self.source}: refused, {_reason(error)}") from None
         trainer.resume_clocks(time.perf_counter() - self.clock)
         return trainer
+
+    def _check_runs(self, trainer: SlotTrainer) -> None:
+        """Refuse a batch whose busy slots do not train the runs (and env steps) its
+        metadata lists, in slot order, as :func:`save_inflight` writes them."""
+        busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
+        tags = [trainer.searches[slot].tag for slot in busy]
+        if tags != list(self.runs) or not all(
+            type(tag) is tuple and len(tag) == 2 and type(tag[1]) is int for tag in tags
+        ):
+            raise ValueError("its busy slots' searches are not the runs its metadata lists")
+        if [int(trainer.steps[slot]) for slot in busy] != list(self.steps):
+            raise ValueError("its busy slots' env steps are not those its metadata lists")
 
 
 def read_inflight(checkpoint: InflightCheckpoint) -> StoredBatch:
@@ -298,7 +325,10 @@ def read_inflight(checkpoint: InflightCheckpoint) -> StoredBatch:
         raise ValueError(f"{meta}: refused, {_reason(error)}") from None
     if rewritten:
         raise ValueError(f"{meta}: rewritten since it was listed")
-    return StoredBatch(checkpoint.data_path, trainer, _read_tensors(checkpoint), clock)
+    tensors = _read_tensors(checkpoint)
+    return StoredBatch(
+        checkpoint.data_path, trainer, tensors, clock, checkpoint.runs, checkpoint.steps
+    )
 
 
 def _read_tensors(checkpoint: InflightCheckpoint) -> dict[str, Any]:

@@ -108,12 +108,13 @@ def run_lockstep(
     a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
     (it keeps the checkpoint's number of slots).
     """
-    from lonlib.experiment import open_run, run_lock_path, run_summary
+    from lonlib.experiment import experiment_plan, open_run, run_lock_path, run_summary
 
     check_lockstep(config.ddpg, slots)
     if checkpoint_seconds is not None:
         check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
     out = Path(out)
+    plan = experiment_plan(out, config)  # a checkpoint listing other runs is refused
     pending: deque[Job] = deque(jobs)
     active: dict[Job, _Run] = {}
 
@@ -160,7 +161,7 @@ def run_lockstep(
     def restore() -> tuple[SlotTrainer, Path] | None:
         """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
         continue made active (the others go back to the front of ``pending``)."""
-        for checkpoint in inflight_checkpoints(out):
+        for checkpoint in inflight_checkpoints(out, plan):
             if checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(pending):
                 continue
             ours = ExitStack()  # a live batch holds its checkpoint's lock

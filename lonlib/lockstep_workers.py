@@ -177,11 +177,12 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
     """Split in-flight checkpoints of ``jobs`` until there is one per worker process (or
     each holds one run), so that every process resumes searches; a checkpoint whose runs
     another process holds is left alone."""
-    from lonlib.experiment import hold_runs
+    from lonlib.experiment import experiment_plan, hold_runs
 
     wanted = set(jobs)
+    plan = experiment_plan(out, config)  # a checkpoint listing other runs is refused
     while True:
-        stored = [c for c in inflight_checkpoints(out) if not wanted.isdisjoint(c.runs)]
+        stored = [c for c in inflight_checkpoints(out, plan) if not wanted.isdisjoint(c.runs)]
         if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
             return
         largest = stored[0]

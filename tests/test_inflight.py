@@ -2,6 +2,7 @@
 a format version, hostile or damaged files refused without running anything, and no tie to
 module paths or class names."""
 
+import dataclasses
 import io
 import json
 import os
@@ -18,7 +19,7 @@ import torch
 
 import lonlib
 from lonlib.ddpg import SlotTrainer
-from lonlib.experiment import run_experiment, run_status
+from lonlib.experiment import experiment_plan, run_experiment, run_status
 from lonlib.inflight import (
     FORMAT,
     inflight_checkpoints,
@@ -574,6 +575,86 @@ def resumed_despite(serial, tmp_path, monkeypatch, caplog, plant) -> str:
     folders = sorted(str(path.relative_to(tmp_path)) for path in tmp_path.glob("p=*/*"))
     assert folders == ["p=0.001/run_0000", "p=0.001/run_0001"]
     return caplog.text
+
+
+# ------------------------------------------------------------------ the runs it lists
+
+PLAN = ({P}, 3)  # the runs of an experiment of one p and three runs
+RUN_CASES = {  # the metadata's runs, or a search's tag: refused when listed, or when read
+    "p NaN": (lambda m: {**m, "runs": [[np.nan, 0], m["runs"][1]]}, r"runs\[0\] p must be finite"),
+    "p of another experiment": (
+        lambda m: {**m, "runs": [[0.5, 0], m["runs"][1]]},
+        "run 0 of p=0.5 is not one of this experiment's",
+    ),
+    "a negative run": (lambda m: {**m, "runs": [[P, -3], m["runs"][1]]}, r"run must be in \[0"),
+    "a run past the experiment's": (
+        lambda m: {**m, "runs": [m["runs"][0], [P, 7]]},
+        "run 7 of p=0.001 is not one of this experiment's",
+    ),
+    "a run as a fraction": (
+        lambda m: {**m, "runs": [[P, 0.5], m["runs"][1]]},
+        "must be an integer",
+    ),
+    "a run listed twice": (lambda m: {**m, "runs": [m["runs"][0]] * 2}, "listed twice"),
+    "negative trials": (lambda m: {**m, "trials": [-1, 0]}, r"trials must be in \[0"),
+    "negative steps": (lambda m: {**m, "steps": [-1, 125]}, r"steps must be in \[0"),
+    "a slot's run not listed": (
+        lambda m: {**m, "runs": [m["runs"][0], [P, 1]]},
+        "busy slots' searches are not the runs its metadata lists",
+    ),
+    "a slot's tag not a run": (
+        lambda m: with_search_value(m, tag="planted"),
+        "busy slots' searches are not the runs its metadata lists",
+    ),
+    "other env steps": (
+        lambda m: {**m, "steps": [m["steps"][0], 7]},
+        "env steps are not those its metadata lists",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", RUN_CASES)
+def test_runs_that_are_not_the_experiments_or_the_batchs_are_refused(
+    copy_of, tmp_path, caplog, case
+):
+    checkpoint, _, _ = copy_of
+    change, message = RUN_CASES[case]
+    with_metadata(checkpoint, change)
+    listed = inflight_checkpoints(tmp_path, PLAN)
+    if listed:
+        with pytest.raises(ValueError, match=f"refused, .*{message}"):
+            load_inflight(*listed)
+    else:
+        assert re.search(f"refused in-flight checkpoint skipped .*{message}", caplog.text)
+
+
+def test_a_run_of_an_earlier_sessions_configuration_is_the_experiments(tmp_path):
+    """A session may run fewer p values or runs than the experiment's manifest holds."""
+    config = SMALL
+    run_experiment(dataclasses.replace(config, max_local_searches=1), tmp_path, progress=False)
+    fewer = dataclasses.replace(config, runs=1, perturbations=(1e-4,))
+    perturbations, runs = experiment_plan(tmp_path, fewer)
+    assert (set(perturbations), runs) == ({1e-4, P}, 2)
+
+
+PLANTED_RUNS = {
+    "p NaN": lambda m: {**m, "runs": [[np.nan, 0], m["runs"][1]]},
+    "a run past the experiment's": lambda m: {**m, "runs": [m["runs"][0], [P, 7]]},
+    "a negative run": lambda m: {**m, "runs": [[P, -3], m["runs"][1]]},
+    "a slot's tag not listed": lambda m: with_search_value(m, tag=[P, 5]),
+}
+
+
+@pytest.mark.parametrize("case", PLANTED_RUNS)
+def test_runs_that_are_not_the_experiments_are_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    """Nothing is locked or created for a run that is not the experiment's (no p=nan/,
+    run_-003/ or run_0007/), and a slot training a run its metadata does not list is
+    refused, not resumed to a KeyError."""
+    plant = PLANTED_RUNS[case]
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, plant))
+    assert "in-flight checkpoint removed" in log and "refused" in log
 
 
 # ------------------------------------------------------------------ a format version
