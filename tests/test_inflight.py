@@ -18,10 +18,11 @@ import pytest
 import torch
 
 import lonlib
-from lonlib.ddpg import SlotTrainer
+from lonlib.ddpg import JUDGE_BATCH, SlotTrainer
 from lonlib.experiment import experiment_plan, run_experiment, run_status
 from lonlib.inflight import (
     FORMAT,
+    StoredBatch,
     inflight_checkpoints,
     load_inflight,
     new_checkpoint_path,
@@ -52,7 +53,7 @@ def mid_search_trainer() -> SlotTrainer:
     thetas = rng.uniform(-0.3, 0.3, (3, actor_spec(1).n_params))
     omegas = rng.uniform(-0.3, 0.3, (3, critic_spec(1).n_params))
     trainer = SlotTrainer(thetas, omegas, [5, 6, 7], CONFIG.env, CONFIG.ddpg, tags=TAGS)
-    trainer.judge_batch = 100  # evaluations stay queued: the checkpoint must carry them
+    trainer.judge_batch = JUDGE_BATCH  # evaluations stay queued: the checkpoint carries them
     for _ in range(125):
         assert not trainer.step()
     trainer.drop([1])  # as a restored batch drops a run that went on: a free slot
@@ -128,7 +129,7 @@ def test_a_checkpoint_holds_only_tensors_and_plain_data(written):
 def test_a_restored_batch_continues_bit_for_bit(written):
     checkpoint, uninterrupted, original = written
     restored = load_inflight(checkpoint)
-    assert restored.judge_batch == 100 and restored.pending and not restored.busy.all()
+    assert restored.judge_batch == JUDGE_BATCH and restored.pending and not restored.busy.all()
     assert finish(restored) == uninterrupted
     # Every attribute of the batch and its parts is restored: an attribute added to the
     # trainer but not to its checkpoint makes the sets differ (bump FORMAT with the fix).
@@ -655,6 +656,167 @@ def test_runs_that_are_not_the_experiments_are_refused_by_a_resuming_experiment(
     plant = PLANTED_RUNS[case]
     log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, plant))
     assert "in-flight checkpoint removed" in log and "refused" in log
+
+
+# ------------------------------------------------------------------ counters out of range
+
+
+def with_tensor(name: str, change):
+    """A tensor case: ``name`` replaced by ``change(tensor)``."""
+    return lambda t: shaped(t, name, change(t[name].clone()))
+
+
+def set_first(tensor, value):
+    tensor.view(-1)[0] = value
+    return tensor
+
+
+COUNTER_CASES = {
+    "negative steps": (with_tensor("slots.steps", lambda t: -t), r"slots.steps: slot 0"),
+    "steps past the budget": (
+        with_tensor("slots.steps", lambda t: t + CONFIG.ddpg.max_steps),
+        r"slots.steps: slot 0",
+    ),
+    "negative episodes": (with_tensor("slots.episodes", lambda t: -t), "slots.episodes: slot 0"),
+    "negative updates": (with_tensor("slots.updates", lambda t: -t), "slots.updates: slot 0"),
+    "more updates than steps": (
+        with_tensor("slots.updates", lambda t: t + 1000),
+        "slots.updates: slot 0",
+    ),
+    "negative loss count": (
+        with_tensor("slots.loss_count", lambda t: t - 100),
+        "slots.loss_count: slot 0",
+    ),
+    "negative last improvement": (
+        with_tensor("slots.last_improvement", lambda t: -t),
+        "slots.last_improvement: slot 0",
+    ),
+    "negative episode steps": (
+        with_tensor("sim.step_count", lambda t: set_first(t, -1)),
+        "sim.step_count: slot 0",
+    ),
+    "episode steps past the limit": (
+        with_tensor("sim.step_count", lambda t: set_first(t, CONFIG.env.steps + 1)),
+        "sim.step_count: slot 0",
+    ),
+    "an end reason that is none": (
+        with_tensor("sim.end_reason", lambda t: set_first(t, 77)),
+        "sim.end_reason: slot 0",
+    ),
+    "a busy slot's episode ended": (
+        with_tensor("sim.end_reason", lambda t: set_first(t, 2)),
+        "sim.end_reason: slot 0",
+    ),
+    "more upright steps than steps": (
+        with_tensor("sim.upright_sum", lambda t: t + 1000),
+        "sim.upright_sum: slot 0",
+    ),
+    "a negative episode in the history": (
+        with_tensor("searches.history", lambda t: set_first(t, -1)),
+        "searches.history: a negative count",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", COUNTER_CASES)
+def test_counters_no_search_reaches_are_refused(copy_of, case):
+    checkpoint, tensors, _ = copy_of
+    change, message = COUNTER_CASES[case]
+    rewrite(checkpoint, tensors=change(tensors))
+    with pytest.raises(ValueError, match=f"refused, .*{message}"):
+        load_inflight(checkpoint)
+
+
+PLAIN_COUNTER_CASES = {
+    "judge batch of a billion": (
+        lambda p: {**p, "judge_batch": 10**9},
+        r"judge_batch must be in \[1, 16\]",
+    ),
+    "judge batch zero": (lambda p: {**p, "judge_batch": 0}, r"judge_batch must be in \[1, 16\]"),
+    "fewer than queued": (lambda p: {**p, "judge_batch": 1}, "more queued than a step leaves"),
+    "a search's env steps past the budget": (
+        lambda p: with_search(p, env_steps=10**12),
+        r"env_steps must be in \[0, 240\]",
+    ),
+    "a search's negative env steps": (
+        lambda p: with_search(p, env_steps=-5),
+        r"env_steps must be in \[0, 240\]",
+    ),
+    "a search's updates past the budget": (
+        lambda p: with_search(p, updates=10**9),
+        r"updates must be in \[0, 240\]",
+    ),
+    "a search's infinite start time": (
+        lambda p: with_search(p, started=np.inf),
+        "started must be finite",
+    ),
+    "a search's negative seconds": (lambda p: with_search(p, seconds=-1.0), "seconds must be >= 0"),
+    "a search's NaN fitness": (
+        lambda p: with_search(p, fitness=np.nan),
+        "fitness must be a number",
+    ),
+    "a search's stop reason": (lambda p: with_search(p, stop_reason="x"), "stop_reason must be"),
+    "a search's episodes not its slot's": (
+        lambda p: with_search(p, episodes=0, pending=0),
+        "trainer.searches: slot 0",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", PLAIN_COUNTER_CASES)
+def test_plain_counters_no_search_reaches_are_refused(copy_of, case):
+    checkpoint, tensors, plain = copy_of
+    change, message = PLAIN_COUNTER_CASES[case]
+    changed = change(plain)
+    if case == "a search's episodes not its slot's":  # its history and queue go with it
+        tensors = {**tensors, "searches.history": tensors["searches.history"][3:]}
+        tensors["pending.theta"] = tensors["pending.theta"][:0]
+        tensors["pending.omega"] = tensors["pending.omega"][:0]
+        changed = {**changed, "pending": []}
+        changed["searches"][2] = {**changed["searches"][2], "pending": 0}
+        rewrite(checkpoint, tensors=tensors)
+    rewrite(checkpoint, trainer=changed)
+    with pytest.raises(ValueError, match=f"refused, .*{message}"):
+        load_inflight(checkpoint)
+
+
+@pytest.mark.parametrize(
+    "case", ["negative steps", "a busy slot's episode ended", "episode steps past the limit"]
+)
+def test_counters_no_search_reaches_are_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    def plant(checkpoint):
+        tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
+        rewrite(checkpoint, tensors=COUNTER_CASES[case][0](tensors))
+
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, plant)
+    assert "stale in-flight checkpoint removed" in log and "no search reaches" in log
+
+
+def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
+    """The ranges refused above are the step loop's invariants: every state a batch writes
+    (searches starting, in their warm-up, training, ending, slots refilled or freed, the
+    start a candidate, ties broken) is read back."""
+    import lonlib.lockstep
+
+    ddpg = dataclasses.replace(CONFIG.ddpg, count_start=True, plateau_tiebreak=True)
+    config = dataclasses.replace(CONFIG, runs=3, max_local_searches=3, ddpg=ddpg)
+    read = []
+
+    def read_back(_path, trainer, _trials):  # what save_inflight writes, read as it is read
+        busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
+        plain, tensors = trainer.to_checkpoint()
+        plain = json.loads(json.dumps(plain))
+        runs, steps = [trainer.tags()[s] for s in busy], [int(trainer.steps[s]) for s in busy]
+        stored = StoredBatch(Path("x.pt"), plain, tensors, 0.0, tuple(runs), tuple(steps))
+        read.append(stored.trainer().slots)
+
+    monkeypatch.setattr(lonlib.lockstep, "save_inflight", read_back)
+    run_experiment(
+        config, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
+    )
+    assert len(read) > 500
 
 
 # ------------------------------------------------------------------ a format version
