@@ -45,6 +45,7 @@ import contextlib
 import io
 import json
 import logging
+import re
 import time
 import uuid
 from collections.abc import Collection
@@ -73,6 +74,9 @@ INFLIGHT_FOLDER = ".inflight"
 # (tests/test_inflight.py fails until the new layout is written down there).
 FORMAT = 3
 Job = tuple[float, int]
+# A batch's id and a write's id (the names of its files): what new_id makes. Files of other
+# names are never read, and never used as patterns to find files by (a name "*" would be).
+ID = re.compile(r"[0-9a-f]{12}")
 # An experiment's runs: its perturbation strengths and its number of runs per strength.
 Plan = tuple[Collection[float], int]
 
@@ -112,9 +116,14 @@ def checkpoint_lock_path(checkpoint: InflightCheckpoint | Path) -> Path:
     return path.with_suffix(".lock")
 
 
+def new_id() -> str:
+    """A new batch or write id (:data:`ID`)."""
+    return uuid.uuid4().hex[:12]
+
+
 def new_checkpoint_path(out: str | Path) -> Path:
     """The metadata path of a new batch's checkpoint."""
-    return inflight_folder(out) / f"{uuid.uuid4().hex[:12]}.json"
+    return inflight_folder(out) / f"{new_id()}.json"
 
 
 def inflight_checkpoints(out: str | Path, plan: Plan | None = None) -> list[InflightCheckpoint]:
@@ -138,6 +147,13 @@ def scan_inflight(
     :data:`FORMAT` (once per process). Never raises for a file's content."""
     found, refused = [], []
     for meta in sorted(inflight_folder(out).glob("*.json")):
+        if not ID.fullmatch(meta.stem):
+            _report_once(
+                meta,
+                "%s: not the name of an in-flight checkpoint (12 hex digits): ignored, "
+                "never read or removed",
+            )
+            continue
         try:
             data = meta.read_bytes()  # an error here is the file system's, past it the content's
         except OSError as error:
@@ -180,6 +196,8 @@ def _listed(meta: Path, payload: dict[str, Any], plan: Plan | None) -> InflightC
             if p not in perturbations or run >= count:
                 raise ValueError(f"run {run} of p={p} is not one of this experiment's")
     write_id = plain_str(payload["write_id"], "write_id")
+    if not ID.fullmatch(write_id):
+        raise ValueError(f"write_id must be 12 hex digits, not {short_repr(write_id)}")
     data = f"{meta.stem}.{write_id}.pt"
     if payload["data"] != data:
         raise ValueError(f"its data file must be {data}, not {short_repr(payload['data'])}")
@@ -203,19 +221,24 @@ def _job(entry: Any, name: str) -> Job:
 _reported: set[Path] = set()
 
 
-def _report_other_format(meta: Path, found: Any) -> None:
-    """Say (once per process) that the checkpoint ``meta`` of format ``found`` is not read,
-    what that costs, and how to silence it."""
+def _report_once(meta: Path, message: str, *args: Any) -> None:
+    """Log ``message`` (``%s``: ``meta``, then ``args``) about ``meta`` once per process."""
     if meta in _reported:
         return
     _reported.add(meta)
+    log.warning(message, meta, *args)
+
+
+def _report_other_format(meta: Path, found: Any) -> None:
+    """Say (once per process) that the checkpoint ``meta`` of format ``found`` is not read,
+    what that costs, and how to silence it."""
     kind = "a pickled checkpoint of an older lonlib" if found == 2 else "another lonlib's"
-    log.warning(
+    _report_once(
+        meta,
         "%s: in-flight checkpoint of format %s (%s), this lonlib reads format %d: not read "
         "(nothing in it runs). Its runs continue from their stored trials, losing at most the "
         "minutes they had in flight. Delete %s.* (or, with no lockstep batch running, %s/) to "
         "silence this message",
-        meta,
         short_repr(found)[:40],
         kind,
         FORMAT,
@@ -229,7 +252,7 @@ def save_inflight(metadata_path: Path, trainer: SlotTrainer, trials: dict[Job, i
     of stored trials of each run it trains (``trials``, keyed by the slots' tags): its
     tensors first, then the metadata with its plain data; then remove the data file it
     supersedes."""
-    write_id = uuid.uuid4().hex[:12]
+    write_id = new_id()
     data_path = metadata_path.with_name(f"{metadata_path.stem}.{write_id}.pt")
     busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
     runs = [trainer.tags()[slot] for slot in busy]
@@ -382,8 +405,11 @@ def load_inflight(checkpoint: InflightCheckpoint, device: str | None = None) -> 
 
 def remove_leftovers(metadata_path: Path, keep: Path | None = None) -> None:
     """Remove the batch's data files other than ``keep`` and its interrupted writes (call
-    as the batch's owner, i.e. holding its runs' locks)."""
+    as the batch's owner, i.e. holding its runs' locks). Only for a batch id (:data:`ID`):
+    another name is never made a pattern."""
     folder, stem = metadata_path.parent, metadata_path.stem
+    if not ID.fullmatch(stem):
+        return
     for file in [*folder.glob(f"{stem}.*.pt"), *folder.glob(f".{stem}.*.tmp")]:
         if file != keep:
             with contextlib.suppress(FileNotFoundError):

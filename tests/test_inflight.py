@@ -26,6 +26,8 @@ from lonlib.inflight import (
     inflight_checkpoints,
     load_inflight,
     new_checkpoint_path,
+    remove_inflight,
+    remove_leftovers,
     save_inflight,
 )
 from lonlib.nets import actor_spec, critic_spec
@@ -817,6 +819,67 @@ def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
         config, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
     )
     assert len(read) > 500
+
+
+# ------------------------------------------------------------------ names
+
+
+def renamed(checkpoint, name: str, write_id: str | None = None) -> Path:
+    """``checkpoint`` moved to the batch id ``name`` (and write id): its metadata path."""
+    folder, write_id = checkpoint.metadata_path.parent, write_id or checkpoint.write_id
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    meta |= {"write_id": write_id, "data": f"{name}.{write_id}.pt"}
+    checkpoint.metadata_path.unlink()
+    checkpoint.data_path.rename(folder / f"{name}.{write_id}.pt")
+    (folder / f"{name}.json").write_text(json.dumps(meta))
+    return folder / f"{name}.json"
+
+
+@pytest.mark.parametrize("name", ["*", "[0-9a-f]*", "0123456789AB"])
+def test_a_checkpoint_of_another_name_is_ignored_and_never_a_pattern(
+    copy_of, tmp_path, caplog, name
+):
+    checkpoint, _, _ = copy_of
+    folder = checkpoint.metadata_path.parent
+    meta = renamed(checkpoint, name)
+    others = [folder / "0123456789ab.0123456789ab.pt", folder / ".0123456789ab.json.x.tmp"]
+    for other in others:  # another batch's data file, and its write in progress
+        other.write_bytes(b"theirs")
+    assert inflight_checkpoints(tmp_path) == []
+    remove_leftovers(meta)
+    remove_inflight(meta)
+    assert all(other.exists() for other in others)
+    assert "not the name of an in-flight checkpoint" in caplog.text
+
+
+def test_a_write_id_that_is_a_path_is_refused(copy_of, tmp_path, caplog):
+    checkpoint, _, _ = copy_of
+    (checkpoint.metadata_path.parent / f"{checkpoint.name}.x").mkdir()
+    (tmp_path / "elsewhere").mkdir()  # the data file it names: outside the folder
+    renamed(checkpoint, checkpoint.name, write_id="x/../../elsewhere/y")
+    assert (tmp_path / "elsewhere" / "y.pt").exists()
+    assert inflight_checkpoints(tmp_path) == []
+    assert "write_id must be 12 hex digits" in caplog.text
+
+
+def test_a_checkpoint_named_as_a_pattern_is_ignored_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog
+):
+    """A metadata file named ``*.json`` is never read, nor its name used to find the files
+    of its batch: another batch's files stay; its runs continue from their stored trials."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    folder = checkpoint.metadata_path.parent
+    other = folder / "0123456789ab.0123456789ab.pt"  # another batch's
+    other.write_bytes(b"theirs")
+    planted = renamed(checkpoint, "*")
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert other.exists() and planted.exists()
+    assert "not the name of an in-flight checkpoint" in caplog.text
+    assert "resumed" not in caplog.text and "Traceback" not in caplog.text
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
 
 
 # ------------------------------------------------------------------ a format version

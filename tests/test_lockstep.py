@@ -361,9 +361,10 @@ def fake_checkpoint(out, runs, trials):
 
     folder = out / ".inflight"
     folder.mkdir(exist_ok=True)
-    meta = {"format": FORMAT, "write_id": "x", "data": "a.x.pt", "saved": 0, "runs": runs}
-    meta |= {"trials": trials, "steps": [10] * len(runs)}
-    (folder / "a.json").write_text(json.dumps(meta))
+    batch, write = "0123456789ab", "ba9876543210"  # ids as lonlib makes them
+    meta = {"format": FORMAT, "write_id": write, "data": f"{batch}.{write}.pt", "saved": 0}
+    meta |= {"runs": runs, "trials": trials, "steps": [10] * len(runs)}
+    (folder / f"{batch}.json").write_text(json.dumps(meta))
     return folder
 
 
