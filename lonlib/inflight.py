@@ -42,6 +42,7 @@ progress, never results: deleting ``.inflight/`` costs at most the searches in f
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import logging
@@ -83,6 +84,11 @@ Plan = tuple[Collection[float], int]
 
 class CheckpointUnreadable(OSError):
     """A checkpoint's file could not be read now (kept: it may be readable later)."""
+
+
+class OtherSettings(Exception):
+    """A checkpoint trained with other settings than this session's (kept: a session with
+    its settings continues it; meanwhile its runs restart from their stored trials)."""
 
 
 @dataclass(frozen=True)
@@ -396,9 +402,29 @@ def _load_error(error: Exception) -> str:
     return lines[0].split(". ")[0].strip()
 
 
+def check_settings(
+    checkpoint: InflightCheckpoint, stored: StoredBatch, env_config: PendulumConfig, hp: DDPGConfig
+) -> None:
+    """Raise :class:`OtherSettings`, naming each setting that differs and its value in this
+    session, if ``stored`` (``checkpoint``'s batch) was trained with settings other than
+    ``env_config`` and ``hp`` (``ValueError`` if its settings are refused)."""
+    env_theirs, hp_theirs = stored.settings()
+    differ = []
+    for prefix, ours, theirs in (("", hp, hp_theirs), ("env.", env_config, env_theirs)):
+        for field in dataclasses.fields(ours):
+            mine, its = getattr(ours, field.name), getattr(theirs, field.name)
+            if mine != its:
+                differ.append(f"{prefix}{field.name}={its!r} (this session: {mine!r})")
+    if differ:
+        raise OtherSettings(
+            f"{checkpoint.metadata_path}: in-flight checkpoint trained with {', '.join(differ)}: "
+            "resume with those to continue it; its runs restart from their stored trials"
+        )
+
+
 def load_inflight(checkpoint: InflightCheckpoint, device: str | None = None) -> SlotTrainer:
     """The :class:`lonlib.ddpg.SlotTrainer` stored in ``checkpoint``, on ``device`` (default:
-    where it was trained; the caller checks the settings, :meth:`StoredBatch.settings`).
+    where it was trained; the caller checks the settings, :func:`check_settings`).
     Raises as :func:`read_inflight` and :meth:`StoredBatch.trainer`."""
     return read_inflight(checkpoint).trainer(device)
 
@@ -426,12 +452,20 @@ def remove_inflight(metadata_path: Path) -> None:
         checkpoint_lock_path(metadata_path).unlink()
 
 
-def split_inflight(checkpoint: InflightCheckpoint, parts: int, device: str | None = None) -> None:
+def split_inflight(
+    checkpoint: InflightCheckpoint,
+    parts: int,
+    settings: tuple[PendulumConfig, DDPGConfig] | None = None,
+) -> None:
     """Replace ``checkpoint`` by ``parts`` checkpoints of about equal numbers of its runs
     (for as many processes; each part continues its searches exactly as the whole would).
-    Raises as :func:`load_inflight`, or :class:`lonlib.store.DataWriteError` (then no part
-    is left)."""
-    trainer = load_inflight(checkpoint, device)
+    With ``settings`` (this session's environment and DDPG settings), a batch trained with
+    others is not read further (:class:`OtherSettings`, :func:`check_settings`). Raises as
+    :func:`load_inflight`, or :class:`lonlib.store.DataWriteError` (then no part is left)."""
+    stored = read_inflight(checkpoint)
+    if settings is not None:
+        check_settings(checkpoint, stored, *settings)
+    trainer = stored.trainer()
     trials = dict(zip(checkpoint.runs, checkpoint.trials, strict=True))
     busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
     written: list[Path] = []

@@ -35,6 +35,8 @@ from lonlib.ddpg import DDPGConfig, SlotTrainer, check_batch_size
 from lonlib.inflight import (
     CheckpointUnreadable,
     InflightCheckpoint,
+    OtherSettings,
+    check_settings,
     checkpoint_lock_path,
     inflight_checkpoints,
     new_checkpoint_path,
@@ -340,20 +342,13 @@ def _restore(
         remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
         try:
             stored = read_inflight(checkpoint)
-            env_config, hp = stored.settings()
-            same = hp == config.ddpg and env_config == config.env
-            trainer = stored.trainer() if same else None
+            check_settings(checkpoint, stored, config.env, config.ddpg)
+            trainer = stored.trainer()
+        except OtherSettings as error:  # kept for a session with those settings
+            log.warning("%s", error)
+            return None
         except ValueError as error:  # truncated, planted, or not of this layout
             stale = str(error)
-            return None
-        if trainer is None:
-            log.warning(
-                "%s: in-flight checkpoint trained with device=%r, threads=%d: resume with those "
-                "to continue it; its runs restart from their stored trials",
-                checkpoint.metadata_path,
-                hp.device,
-                hp.threads,
-            )
             return None
         dropped = _slots_gone_on(checkpoint, trainer, runs)
         if len(dropped) < len(runs):

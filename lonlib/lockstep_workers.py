@@ -25,6 +25,7 @@ from typing import Any
 
 from lonlib.inflight import (
     CheckpointUnreadable,
+    OtherSettings,
     checkpoint_lock_path,
     inflight_checkpoints,
     remove_inflight,
@@ -190,9 +191,11 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
             if not held:
                 return
             try:
-                split_inflight(
-                    largest, min(workers - len(stored) + 1, len(largest.runs)), config.ddpg.device
-                )
+                parts = min(workers - len(stored) + 1, len(largest.runs))
+                split_inflight(largest, parts, (config.env, config.ddpg))
+            except OtherSettings as error:  # kept for a session with those settings
+                log.warning("%s", error)
+                return
             except (CheckpointUnreadable, DataWriteError) as error:
                 log.warning("%s: not split (%s)", largest.metadata_path, error)
                 return

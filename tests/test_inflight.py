@@ -22,13 +22,17 @@ from lonlib.ddpg import JUDGE_BATCH, SlotTrainer
 from lonlib.experiment import experiment_plan, run_experiment, run_status
 from lonlib.inflight import (
     FORMAT,
+    OtherSettings,
     StoredBatch,
+    check_settings,
     inflight_checkpoints,
     load_inflight,
     new_checkpoint_path,
+    read_inflight,
     remove_inflight,
     remove_leftovers,
     save_inflight,
+    split_inflight,
 )
 from lonlib.nets import actor_spec, critic_spec
 from tests.test_lockstep import CONFIG, SMALL, killed_after_checkpoints, serial, stored
@@ -880,6 +884,54 @@ def test_a_checkpoint_named_as_a_pattern_is_ignored_by_a_resuming_experiment(
     assert "resumed" not in caplog.text and "Traceback" not in caplog.text
     want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
     pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+
+
+# ------------------------------------------------------------------ other settings
+
+SETTINGS_CASES = {
+    "threads": ({"ddpg": {"threads": 2}}, "threads=2 (this session: 1)"),
+    "device": ({"ddpg": {"device": "cuda"}}, "device='cuda' (this session: 'cpu')"),
+    "two DDPG settings": (
+        {"ddpg": {"learning_rate": 0.01, "threads": 3}},
+        "learning_rate=0.01 (this session: 0.001), threads=3 (this session: 1)",
+    ),
+    "an environment setting": ({"env": {"steps": 41}}, "env.steps=41 (this session: 40)"),
+}
+
+
+@pytest.mark.parametrize("case", SETTINGS_CASES)
+def test_a_checkpoint_of_other_settings_names_those_that_differ(copy_of, case):
+    checkpoint, _, plain = copy_of
+    changes, differ = SETTINGS_CASES[case]
+    rewrite(checkpoint, trainer={**plain, **{k: {**plain[k], **v} for k, v in changes.items()}})
+    with pytest.raises(OtherSettings) as raised:
+        check_settings(checkpoint, read_inflight(checkpoint), CONFIG.env, CONFIG.ddpg)
+    assert f"in-flight checkpoint trained with {differ}: resume with those" in str(raised.value)
+    with pytest.raises(OtherSettings, match=re.escape(differ)):  # nor split with them
+        split_inflight(checkpoint, 2, (CONFIG.env, CONFIG.ddpg))
+    assert inflight_checkpoints(checkpoint.metadata_path.parent.parent) == [checkpoint]
+
+
+def test_a_checkpoint_of_other_settings_is_kept_by_resuming_processes(
+    serial, tmp_path, monkeypatch, caplog, capfd
+):
+    """Processes resuming a checkpoint split it only if it was trained with their settings:
+    built with its own it would set this process's torch threads (and split a batch that
+    none of them continues)."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    trainer = load_inflight(checkpoint)
+    trainer.hp = dataclasses.replace(trainer.hp, threads=2)
+    save_inflight(checkpoint.metadata_path, trainer, dict.fromkeys(checkpoint.runs, 0))
+    threads = torch.get_num_threads()
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2, workers=2)
+    assert torch.get_num_threads() == threads
+    assert "trained with threads=2 (this session: 1): resume with those" in caplog.text
+    assert "resumed" not in caplog.text + capfd.readouterr().err
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert not inflight_checkpoints(tmp_path)  # its runs ended: removed
 
 
 # ------------------------------------------------------------------ a format version

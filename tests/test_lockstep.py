@@ -345,7 +345,7 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
         assert "resumed 1 searches in flight (70 env steps)" in log
         assert "1 whose runs went on since restart" in log
     elif change == "threads":
-        assert "trained with device='cpu', threads=2" in log and "resumed" not in log
+        assert "trained with threads=2 (this session: 1)" in log and "resumed" not in log
     else:
         assert "stale in-flight checkpoint removed" in log and "resumed" not in log
     want = serial[0][(serial[0]["p"] == 1e-3) & (serial[0]["run"] < 2)].reset_index(drop=True)
