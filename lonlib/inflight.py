@@ -19,10 +19,12 @@ random stream seeds, environments, queued greedy evaluations) every few minutes:
 Data, not code: the batch is exported by :meth:`lonlib.ddpg.SlotTrainer.to_checkpoint` as
 named tensors and JSON that name no Python class, and read back with ``torch.load(...,
 weights_only=True)`` (which builds tensors and plain containers only) and :mod:`json`, every
-tensor's shape and dtype and every value's kind checked against a batch of the stored
-settings before anything is used (:meth:`~lonlib.ddpg.SlotTrainer.from_checkpoint`). So a
-planted or damaged file is refused (and removed) without running anything, and a checkpoint
-does not depend on module paths or class layouts. Every checkpoint carries :data:`FORMAT`;
+tensor's shape and dtype and every value's kind and range checked against a batch of the
+stored settings and the experiment's runs before anything is used or locked
+(:meth:`~lonlib.ddpg.SlotTrainer.from_checkpoint`). So a planted or damaged file is refused
+with a reason (and removed) without running anything, never a traceback; files not named by
+lonlib's ids (:data:`ID`) are ignored. A checkpoint does not depend on module paths or
+class layouts. Every checkpoint carries :data:`FORMAT`;
 one of another format, such as the pickled checkpoints (format 2) of lonlib before, is
 refused with a message and left in place: its runs continue from their stored trials.
 There is no converter: reading format 2 means unpickling it, the hazard this format removes.
