@@ -47,7 +47,7 @@ import torch
 
 from lonlib.ddpg_update import LEARNERS, learner_class
 from lonlib.nets import NetSpec, actor_spec, critic_spec
-from lonlib.pendulum import CoupledPendulums, PendulumConfig
+from lonlib.pendulum import CoupledPendulums, EndReason, PendulumConfig
 from lonlib.plain_state import (
     StateLayoutError,
     TensorReader,
@@ -60,6 +60,7 @@ from lonlib.plain_state import (
     plain_int,
     plain_list,
     plain_str,
+    short_repr,
 )
 from lonlib.progress import progress_bar
 from lonlib.random_streams import (
@@ -704,7 +705,8 @@ class SlotTrainer:
         trainer._configure(env_config, hp, k, hp.device if device is None else device)
         trainer._allocate_slots(k)
         for name in SLOT_ARRAYS:
-            setattr(trainer, name, reader.take_like(f"slots.{name}", getattr(trainer, name)))
+            array = reader.take_like(f"slots.{name}", getattr(trainer, name), finite=True)
+            setattr(trainer, name, array)
         trainer.loss_sum = reader.take_like("slots.loss_sum", trainer.loss_sum)
         trainer.learner = _learner_from_checkpoint(reader, trainer)
         obs_size, n = env_config.observation_size, trainer.n
@@ -718,13 +720,19 @@ class SlotTrainer:
             raise StateLayoutError(f"trainer.stream_seeds: {error}") from None
         trainer.sim = CoupledPendulums(env_config, k)
         for name in CoupledPendulums.STATE_ARRAYS:
-            setattr(trainer.sim, name, reader.take_like(f"sim.{name}", getattr(trainer.sim, name)))
+            array = reader.take_like(f"sim.{name}", getattr(trainer.sim, name), finite=True)
+            setattr(trainer.sim, name, array)
         trainer.sim.rng = generator_from_state(plain["sim_generator"], "trainer.sim_generator")
         trainer.searches, trainer.pending = _searches_from_checkpoint(plain, reader, trainer)
-        trainer.judge_batch = plain_int(plain["judge_batch"], "trainer.judge_batch", 1)
+        # JUDGE_BATCH is the most the constructor sets (fewer slots: as many), and a step
+        # leaves fewer evaluations queued than that
+        trainer.judge_batch = plain_int(plain["judge_batch"], "trainer.judge_batch", 1, JUDGE_BATCH)
+        if len(trainer.pending) >= trainer.judge_batch:
+            raise StateLayoutError("trainer.pending: more queued than a step leaves")
         reader.finish()
         if not np.array_equal(trainer.busy, [s is not None for s in trainer.searches]):
             raise StateLayoutError("trainer: the busy slots are not the slots with a search")
+        _check_counters(trainer)
         return trainer
 
     # ------------------------------------------------------------------ fewer slots
@@ -884,7 +892,7 @@ def _tag_from_plain(value: Any, name: str) -> Any:
         return tuple(value)
     if isinstance(value, _SCALARS):
         return value
-    raise StateLayoutError(f"{name} must be plain data or a list of it, got {value!r}")
+    raise StateLayoutError(f"{name} must be plain data or a list of it, got {short_repr(value)}")
 
 
 def _search_to_plain(search: _Search) -> dict[str, Any]:
@@ -941,19 +949,34 @@ def _searches_to_checkpoint(
     return plain, tensors
 
 
-def _search_fields(entry: Any, name: str) -> dict[str, Any]:
-    """A search's plain data (:func:`_search_to_plain`), every value checked."""
+def _search_fields(entry: Any, name: str, hp: DDPGConfig) -> dict[str, Any]:
+    """A search's plain data (:func:`_search_to_plain`), every value checked: counts within
+    a search's budget, times finite, scores a number or ``-inf`` (none yet)."""
     entry = plain_dict(entry, name, SEARCH_KEYS)
     best = plain_list(entry["best"], f"{name}.best", 2)
     fields = {"tag": _tag_from_plain(entry["tag"], f"{name}.tag")}
-    fields["best"] = tuple(plain_float(v, f"{name}.best") for v in best)
-    for key in ("started", "fitness", "start_fitness", "seconds"):
-        fields[key] = plain_float(entry[key], f"{name}.{key}")
+    fields["best"] = tuple(_score(v, f"{name}.best") for v in best)
+    fields["fitness"] = _score(entry["fitness"], f"{name}.fitness")
+    for key in ("started", "start_fitness"):
+        fields[key] = plain_float(entry[key], f"{name}.{key}", finite=True)
+    fields["seconds"] = plain_float(entry["seconds"], f"{name}.seconds", finite=True)
+    if fields["seconds"] < 0:
+        raise StateLayoutError(f"{name}.seconds must be >= 0, got {fields['seconds']}")
     for key in ("pending", "env_steps", "updates", "episodes"):
-        fields[key] = plain_int(entry[key], f"{name}.{key}", 0)
+        fields[key] = plain_int(entry[key], f"{name}.{key}", 0, hp.max_steps)
     fields["stop_reason"] = plain_str(entry["stop_reason"], f"{name}.stop_reason")
+    if fields["stop_reason"] not in ("patience", "budget"):
+        raise StateLayoutError(f"{name}.stop_reason must be 'patience' or 'budget'")
     fields["final_evaluation"] = plain_bool(entry["final_evaluation"], f"{name}.final_evaluation")
     return fields
+
+
+def _score(value: Any, name: str) -> float:
+    """A greedy score: a number, or ``-inf`` before the first (not NaN nor ``+inf``)."""
+    score = plain_float(value, name)
+    if np.isnan(score) or score == np.inf:
+        raise StateLayoutError(f"{name} must be a number or -Infinity, got {score}")
+    return score
 
 
 def _history(rows: np.ndarray) -> list[EpisodeRecord]:
@@ -961,6 +984,8 @@ def _history(rows: np.ndarray) -> list[EpisodeRecord]:
     ints = rows[:, _INT_COLUMNS]
     if not (np.isfinite(ints) & (ints == np.round(ints))).all():
         raise StateLayoutError("searches.history: an integer column holds a fraction")
+    if (ints < 0).any():
+        raise StateLayoutError("searches.history: a negative count")
     kinds = [int if is_int else float for is_int in _INT_COLUMNS]
     return [
         EpisodeRecord(*(kind(v) for kind, v in zip(kinds, row.tolist(), strict=True)))
@@ -979,12 +1004,12 @@ def _searches_from_checkpoint(
         raise StateLayoutError(f"trainer.history_columns: {columns}, expected {HISTORY_COLUMNS}")
     entries = plain_list(plain["searches"], "trainer.searches", k)
     fields = [
-        None if entry is None else _search_fields(entry, f"trainer.searches[{slot}]")
+        None if entry is None else _search_fields(entry, f"trainer.searches[{slot}]", trainer.hp)
         for slot, entry in enumerate(entries)
     ]
     held = [slot for slot, entry in enumerate(fields) if entry is not None]
     arrays = {
-        name: reader.take_numpy(f"searches.{name}", (len(held), size), torch.float32)
+        name: reader.take_numpy(f"searches.{name}", (len(held), size), torch.float32, True)
         for name, size in (
             ("theta", a_size),
             ("omega", c_size),
@@ -1028,8 +1053,8 @@ def _pending_from_checkpoint(
     """The queued evaluations: each names a slot with a search and an episode of its
     history, and every search queues as many as its count says."""
     queue = plain_list(plain["pending"], "trainer.pending")
-    thetas = reader.take_numpy("pending.theta", (len(queue), a_size), torch.float32)
-    omegas = reader.take_numpy("pending.omega", (len(queue), c_size), torch.float32)
+    thetas = reader.take_numpy("pending.theta", (len(queue), a_size), torch.float32, True)
+    omegas = reader.take_numpy("pending.omega", (len(queue), c_size), torch.float32, True)
     pending = []
     for i, item in enumerate(queue):
         slot, index = plain_list(item, f"trainer.pending[{i}]", 2)
@@ -1045,15 +1070,50 @@ def _pending_from_checkpoint(
     return pending
 
 
+def _check_counters(trainer: SlotTrainer) -> None:
+    """Refuse counters no batch of ``trainer``'s settings reaches. The ranges follow from
+    :meth:`SlotTrainer.step`: a search stops at ``max_steps``; a slot updates, ends an
+    episode and counts a loss at most once per env step (the losses since its last episode
+    end); its patience counts from the warm-up's end or an episode end it has reached; an
+    environment ends at its step limit, counts at most one upright step per step, and a busy
+    slot's is reset as soon as it ends; a busy slot's search holds one record per episode."""
+    hp, sim = trainer.hp, trainer.sim
+    steps, busy = trainer.steps, trainer.busy
+    valid = {
+        "slots.steps": (steps >= 0) & (steps <= hp.max_steps),
+        "slots.updates": (trainer.updates >= 0) & (trainer.updates <= steps),
+        "slots.episodes": (trainer.episodes >= 0) & (trainer.episodes <= steps),
+        "slots.loss_count": (trainer.loss_count >= 0) & (trainer.loss_count <= trainer.updates),
+        "slots.last_improvement": (trainer.last_improvement >= 0)
+        & (trainer.last_improvement <= np.maximum(steps, hp.warmup_steps)),
+        "sim.step_count": (sim.step_count >= 0) & (sim.step_count <= trainer.env_config.steps),
+        "sim.end_reason": np.isin(sim.end_reason, [reason.value for reason in EndReason])
+        & (~busy | (sim.end_reason == EndReason.RUNNING)),
+    }
+    for name in ("upright_sum", "upright_all_sum", "upright_mean_sum"):
+        total = getattr(sim, name)
+        valid[f"sim.{name}"] = (total >= 0) & (total <= sim.step_count)
+    episodes = [len(s.result.history) if s else 0 for s in trainer.searches]
+    valid["trainer.searches"] = ~busy | (np.asarray(episodes) == trainer.episodes)
+    for name, fits in valid.items():
+        if not fits.all():
+            slot = int(np.flatnonzero(~fits)[0])
+            raise StateLayoutError(f"{name}: slot {slot} holds a value no search reaches")
+
+
 def _learner_from_checkpoint(reader: TensorReader, trainer: SlotTrainer) -> Any:
     """The lean learner of ``trainer``'s slots from the ``learner.*`` tensors (Eq. 1 order
     and Adam step counts)."""
     k = len(trainer.busy)
     sizes = {"actor": trainer.a_spec.n_params, "critic": trainer.c_spec.n_params}
     arrays = {
-        name: reader.take_numpy(f"learner.{name}", (k, sizes[name.split("_")[0]]), torch.float32)
+        name: reader.take_numpy(
+            f"learner.{name}", (k, sizes[name.split("_")[0]]), torch.float32, finite=True
+        )
         for name in LEARNER_STATE
     }
+    if any((arrays[name] < 0).any() for name in ("actor_exp_avg_sq", "critic_exp_avg_sq")):
+        raise StateLayoutError("learner: negative Adam second moments")
     steps = reader.take_numpy("learner.adam_steps", (k,), torch.int64)
     if (steps < 0).any():
         raise StateLayoutError("learner.adam_steps: negative step counts")

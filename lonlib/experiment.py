@@ -44,7 +44,13 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
 from lonlib.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.ddpg import check_device
 from lonlib.executors import execute_runs, resolve_executor
-from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints, remove_inflight
+from lonlib.inflight import (
+    Plan,
+    checkpoint_lock_path,
+    inflight_checkpoints,
+    remove_inflight,
+    scan_inflight,
+)
 from lonlib.lock import LockHeld, exclusive_lock
 from lonlib.lockstep import CHECKPOINT_SECONDS, check_lockstep
 from lonlib.lockstep_workers import run_lockstep_processes
@@ -175,17 +181,41 @@ def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]
     return pending
 
 
-def remove_finished_checkpoints(out: Path, todo: list[tuple[float, int]]) -> None:
+def remove_finished_checkpoints(
+    out: Path, todo: list[tuple[float, int]], config: ExperimentConfig | None = None
+) -> None:
     """Remove the in-flight checkpoints (:mod:`lonlib.inflight`) all of whose runs have
-    ended since (they went on without them: nothing in them can be resumed). A checkpoint
-    whose runs another process holds is left to it."""
-    for checkpoint in inflight_checkpoints(out):
+    ended since (they went on without them: nothing in them can be resumed), and those
+    whose metadata is refused (truncated, planted, with ``config`` listing a run that is not
+    one of the experiment's, :func:`experiment_plan`: their runs continue from their stored
+    trials). A checkpoint whose runs another process holds is left to it."""
+    checkpoints, refused = scan_inflight(
+        out, None if config is None else experiment_plan(out, config)
+    )
+    for meta, reason in refused:
+        with hold_runs(out, [], [checkpoint_lock_path(meta)]) as held:
+            if held:
+                log.warning("%s: refused in-flight checkpoint removed (%s)", meta, reason)
+                remove_inflight(meta)
+    for checkpoint in checkpoints:
         if not set(checkpoint.runs).isdisjoint(todo):
             continue
         with hold_runs(out, checkpoint.runs, [checkpoint_lock_path(checkpoint)]) as held:
             if held:
                 log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.name)
                 remove_inflight(checkpoint.metadata_path)
+
+
+def experiment_plan(out: str | Path, config: ExperimentConfig) -> Plan:
+    """The runs of the experiment in ``out`` (:data:`lonlib.inflight.Plan`): those of
+    ``config`` and of the configuration its manifest holds (a session may run fewer p values
+    or runs than earlier ones did)."""
+    perturbations, runs = set(config.perturbations), config.runs
+    try:
+        stored = ExperimentConfig.from_mapping(read_manifest(Path(out))["config"])
+    except Exception:  # none yet, or unreadable (sampling refuses to start then)
+        return perturbations, runs
+    return perturbations | set(stored.perturbations), max(runs, stored.runs)
 
 
 def refuse_mixed_result_paths(out: Path) -> None:
@@ -256,7 +286,7 @@ def run_experiment(
         todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
         if todo and manifest_path(out).exists():
             refuse_mixed_result_paths(out)
-        remove_finished_checkpoints(out, todo)
+        remove_finished_checkpoints(out, todo, config)
         if todo or not manifest_path(out).exists():  # a finished experiment stays untouched
             write_json(manifest_path(out), manifest)
     if todo and config.ddpg.device == "cpu":
@@ -313,7 +343,7 @@ def run_experiment(
             held.clear()
             execute(jobs, wait=True)
         if todo:  # a batch that ended without resuming a checkpoint of its runs left it
-            remove_finished_checkpoints(out, pending_runs(config, out))
+            remove_finished_checkpoints(out, pending_runs(config, out), config)
     finally:
         bar.close()
     return read_experiment_trials(out)

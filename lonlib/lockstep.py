@@ -35,6 +35,8 @@ from lonlib.ddpg import DDPGConfig, SlotTrainer, check_batch_size
 from lonlib.inflight import (
     CheckpointUnreadable,
     InflightCheckpoint,
+    OtherSettings,
+    check_settings,
     checkpoint_lock_path,
     inflight_checkpoints,
     new_checkpoint_path,
@@ -108,12 +110,13 @@ def run_lockstep(
     a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
     (it keeps the checkpoint's number of slots).
     """
-    from lonlib.experiment import open_run, run_lock_path, run_summary
+    from lonlib.experiment import experiment_plan, open_run, run_lock_path, run_summary
 
     check_lockstep(config.ddpg, slots)
     if checkpoint_seconds is not None:
         check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
     out = Path(out)
+    plan = experiment_plan(out, config)  # a checkpoint listing other runs is refused
     pending: deque[Job] = deque(jobs)
     active: dict[Job, _Run] = {}
 
@@ -160,7 +163,7 @@ def run_lockstep(
     def restore() -> tuple[SlotTrainer, Path] | None:
         """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
         continue made active (the others go back to the front of ``pending``)."""
-        for checkpoint in inflight_checkpoints(out):
+        for checkpoint in inflight_checkpoints(out, plan):
             if checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(pending):
                 continue
             ours = ExitStack()  # a live batch holds its checkpoint's lock
@@ -339,20 +342,13 @@ def _restore(
         remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
         try:
             stored = read_inflight(checkpoint)
-            env_config, hp = stored.settings()
-            same = hp == config.ddpg and env_config == config.env
-            trainer = stored.trainer() if same else None
+            check_settings(checkpoint, stored, config.env, config.ddpg)
+            trainer = stored.trainer()
+        except OtherSettings as error:  # kept for a session with those settings
+            log.warning("%s", error)
+            return None
         except ValueError as error:  # truncated, planted, or not of this layout
             stale = str(error)
-            return None
-        if trainer is None:
-            log.warning(
-                "%s: in-flight checkpoint trained with device=%r, threads=%d: resume with those "
-                "to continue it; its runs restart from their stored trials",
-                checkpoint.metadata_path,
-                hp.device,
-                hp.threads,
-            )
             return None
         dropped = _slots_gone_on(checkpoint, trainer, runs)
         if len(dropped) < len(runs):

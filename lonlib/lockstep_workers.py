@@ -25,6 +25,7 @@ from typing import Any
 
 from lonlib.inflight import (
     CheckpointUnreadable,
+    OtherSettings,
     checkpoint_lock_path,
     inflight_checkpoints,
     remove_inflight,
@@ -177,11 +178,12 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
     """Split in-flight checkpoints of ``jobs`` until there is one per worker process (or
     each holds one run), so that every process resumes searches; a checkpoint whose runs
     another process holds is left alone."""
-    from lonlib.experiment import hold_runs
+    from lonlib.experiment import experiment_plan, hold_runs
 
     wanted = set(jobs)
+    plan = experiment_plan(out, config)  # a checkpoint listing other runs is refused
     while True:
-        stored = [c for c in inflight_checkpoints(out) if not wanted.isdisjoint(c.runs)]
+        stored = [c for c in inflight_checkpoints(out, plan) if not wanted.isdisjoint(c.runs)]
         if not stored or len(stored) >= workers or len(stored[0].runs) < 2:
             return
         largest = stored[0]
@@ -189,9 +191,11 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
             if not held:
                 return
             try:
-                split_inflight(
-                    largest, min(workers - len(stored) + 1, len(largest.runs)), config.ddpg.device
-                )
+                parts = min(workers - len(stored) + 1, len(largest.runs))
+                split_inflight(largest, parts, (config.env, config.ddpg))
+            except OtherSettings as error:  # kept for a session with those settings
+                log.warning("%s", error)
+                return
             except (CheckpointUnreadable, DataWriteError) as error:
                 log.warning("%s: not split (%s)", largest.metadata_path, error)
                 return

@@ -12,6 +12,7 @@ fit.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any, TypeVar
 
 import numpy as np
@@ -33,8 +34,12 @@ class TensorReader:
         self._tensors = dict(tensors)
         self._where = where
 
-    def take(self, name: str, shape: tuple[int, ...], dtype: torch.dtype) -> torch.Tensor:
-        """The tensor ``name``, which must be a dense CPU tensor of ``shape`` and ``dtype``."""
+    def take(
+        self, name: str, shape: tuple[int, ...], dtype: torch.dtype, finite: bool = False
+    ) -> torch.Tensor:
+        """The tensor ``name``, which must be a plain dense contiguous CPU tensor (not a
+        ``Parameter`` nor requiring a gradient: in-place updates would fail) of ``shape``
+        and ``dtype``, and with ``finite`` hold no NaN or infinite value."""
         if name not in self._tensors:
             raise StateLayoutError(f"{self._where}: tensor {name!r} is missing")
         value = self._tensors.pop(name)
@@ -45,19 +50,33 @@ class TensorReader:
                 f"{self._where}: {name!r} is {value.dtype} {tuple(value.shape)}, "
                 f"expected {dtype} {tuple(shape)}"
             )
+        if (
+            type(value) is not torch.Tensor
+            or value.requires_grad
+            or not value.is_contiguous()
+            or value.device.type != "cpu"
+        ):
+            raise StateLayoutError(
+                f"{self._where}: {name!r} is not a plain tensor (a Parameter or another "
+                "kind, requiring a gradient, not contiguous or not on the CPU)"
+            )
+        if finite and dtype.is_floating_point and not bool(torch.isfinite(value).all()):
+            raise StateLayoutError(f"{self._where}: {name!r} holds NaN or infinite values")
         return value
 
-    def take_numpy(self, name: str, shape: tuple[int, ...], dtype: torch.dtype) -> np.ndarray:
+    def take_numpy(
+        self, name: str, shape: tuple[int, ...], dtype: torch.dtype, finite: bool = False
+    ) -> np.ndarray:
         """:meth:`take` as a numpy array of its own (not sharing the tensor's memory)."""
-        return self.take(name, shape, dtype).numpy().copy()
+        return self.take(name, shape, dtype, finite).numpy().copy()
 
-    def take_like(self, name: str, like: np.ndarray | torch.Tensor) -> Any:
+    def take_like(self, name: str, like: np.ndarray | torch.Tensor, finite: bool = False) -> Any:
         """The tensor ``name`` with ``like``'s shape and dtype, as ``like``'s kind: a numpy
-        array of its own, or a tensor on ``like``'s device."""
+        array of its own, or a tensor of its own on ``like``'s device."""
         if isinstance(like, np.ndarray):
             dtype = torch.from_numpy(np.empty(0, like.dtype)).dtype
-            return self.take_numpy(name, like.shape, dtype)
-        return self.take(name, tuple(like.shape), like.dtype).to(like.device)
+            return self.take_numpy(name, like.shape, dtype, finite)
+        return self.take(name, tuple(like.shape), like.dtype, finite).to(like.device, copy=True)
 
     def finish(self) -> None:
         """Refuse tensors nobody took (a layout this reader does not know)."""
@@ -68,30 +87,47 @@ class TensorReader:
 def plain_int(value: Any, name: str, low: int | None = None, high: int | None = None) -> int:
     """``value`` as an integer (not a bool) in ``[low, high]``."""
     if isinstance(value, bool) or not isinstance(value, int):
-        raise StateLayoutError(f"{name} must be an integer, got {value!r}")
+        raise StateLayoutError(f"{name} must be an integer, got {short_repr(value)}")
     if (low is not None and value < low) or (high is not None and value > high):
-        raise StateLayoutError(f"{name} must be in [{low}, {high}], got {value}")
+        raise StateLayoutError(f"{name} must be in [{low}, {high}], got {short_repr(value)}")
     return value
 
 
-def plain_float(value: Any, name: str) -> float:
-    """``value`` as a float (JSON numbers, ``NaN`` and ``Infinity`` included; not a bool)."""
+def plain_float(value: Any, name: str, finite: bool = False) -> float:
+    """``value`` as a float (JSON numbers, ``NaN`` and ``Infinity`` included unless
+    ``finite``; not a bool, nor an integer too large for a float)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise StateLayoutError(f"{name} must be a number, got {value!r}")
-    return float(value)
+        raise StateLayoutError(f"{name} must be a number, got {short_repr(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        raise StateLayoutError(f"{name} is too large for a float") from None
+    if finite and not math.isfinite(number):
+        raise StateLayoutError(f"{name} must be finite, got {number}")
+    return number
+
+
+def short_repr(value: Any) -> str:
+    """``repr(value)`` cut short, for messages: a hostile file's values can be huge (an
+    integer of thousands of digits has no ``repr``)."""
+    try:
+        text = repr(value)
+    except ValueError:
+        return f"{type(value).__name__} too large to show"
+    return text if len(text) <= 80 else f"{text[:77]}..."
 
 
 def plain_bool(value: Any, name: str) -> bool:
     """``value``, which must be a bool."""
     if not isinstance(value, bool):
-        raise StateLayoutError(f"{name} must be true or false, got {value!r}")
+        raise StateLayoutError(f"{name} must be true or false, got {short_repr(value)}")
     return value
 
 
 def plain_str(value: Any, name: str) -> str:
     """``value``, which must be text."""
     if not isinstance(value, str):
-        raise StateLayoutError(f"{name} must be text, got {value!r}")
+        raise StateLayoutError(f"{name} must be text, got {short_repr(value)}")
     return value
 
 
@@ -120,7 +156,7 @@ def config_from_plain(cls: type[T], value: Any, name: str) -> T:
     values = plain_dict(value, name, {f.name for f in dataclasses.fields(cls)})
     try:
         return cls(**values)
-    except (TypeError, ValueError) as error:
+    except (TypeError, ValueError, OverflowError) as error:
         raise StateLayoutError(f"{name}: {error}") from None
 
 

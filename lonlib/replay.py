@@ -87,7 +87,7 @@ class ReplayBuffer:
         if (wrong_size | wrong_position).any():
             raise StateLayoutError(f"{prefix}: fill levels or positions outside the buffer")
         width = row_width(obs_size, act_size)
-        rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32)
+        rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32, finite=True)
         out = cls(agents, capacity, obs_size, act_size, device)  # allocated once all fit
         for i, part in enumerate(torch.split(rows, size.tolist())):
             out.data[i, : size[i]] = part.to(out.device)

@@ -2,6 +2,7 @@
 a format version, hostile or damaged files refused without running anything, and no tie to
 module paths or class names."""
 
+import dataclasses
 import io
 import json
 import os
@@ -17,14 +18,21 @@ import pytest
 import torch
 
 import lonlib
-from lonlib.ddpg import SlotTrainer
-from lonlib.experiment import run_experiment
+from lonlib.ddpg import JUDGE_BATCH, SlotTrainer
+from lonlib.experiment import experiment_plan, run_experiment, run_status
 from lonlib.inflight import (
     FORMAT,
+    OtherSettings,
+    StoredBatch,
+    check_settings,
     inflight_checkpoints,
     load_inflight,
     new_checkpoint_path,
+    read_inflight,
+    remove_inflight,
+    remove_leftovers,
     save_inflight,
+    split_inflight,
 )
 from lonlib.nets import actor_spec, critic_spec
 from tests.test_lockstep import CONFIG, SMALL, killed_after_checkpoints, serial, stored
@@ -51,7 +59,7 @@ def mid_search_trainer() -> SlotTrainer:
     thetas = rng.uniform(-0.3, 0.3, (3, actor_spec(1).n_params))
     omegas = rng.uniform(-0.3, 0.3, (3, critic_spec(1).n_params))
     trainer = SlotTrainer(thetas, omegas, [5, 6, 7], CONFIG.env, CONFIG.ddpg, tags=TAGS)
-    trainer.judge_batch = 100  # evaluations stay queued: the checkpoint must carry them
+    trainer.judge_batch = JUDGE_BATCH  # evaluations stay queued: the checkpoint carries them
     for _ in range(125):
         assert not trainer.step()
     trainer.drop([1])  # as a restored batch drops a run that went on: a free slot
@@ -127,7 +135,7 @@ def test_a_checkpoint_holds_only_tensors_and_plain_data(written):
 def test_a_restored_batch_continues_bit_for_bit(written):
     checkpoint, uninterrupted, original = written
     restored = load_inflight(checkpoint)
-    assert restored.judge_batch == 100 and restored.pending and not restored.busy.all()
+    assert restored.judge_batch == JUDGE_BATCH and restored.pending and not restored.busy.all()
     assert finish(restored) == uninterrupted
     # Every attribute of the batch and its parts is restored: an attribute added to the
     # trainer but not to its checkpoint makes the sets differ (bump FORMAT with the fix).
@@ -323,7 +331,45 @@ TENSOR_CASES = {
         lambda t: shaped(t, "searches.history", t["searches.history"][:-1]),
         "'searches.history' is",
     ),
+    # in-place updates of a Parameter, a tensor requiring a gradient or one whose elements
+    # share memory fail (or write through) later
+    "a Parameter": (
+        lambda t: shaped(t, "slots.loss_sum", torch.nn.Parameter(t["slots.loss_sum"])),
+        "'slots.loss_sum' is not a plain tensor",
+    ),
+    "a tensor requiring a gradient": (
+        lambda t: shaped(t, "slots.loss_sum", t["slots.loss_sum"].clone().requires_grad_()),
+        "'slots.loss_sum' is not a plain tensor",
+    ),
+    "elements sharing memory": (
+        lambda t: shaped(t, "slots.loss_sum", torch.zeros(2, 1, dtype=torch.float64).expand(2, 3)),
+        "'slots.loss_sum' is not a plain tensor",
+    ),
+    # NaN where the computation never makes one: it would crash later (or score NaN)
+    "NaN in the simulator": (lambda t: nan_in(t, "sim.phi"), "'sim.phi' holds NaN"),
+    "NaN in an Actor": (lambda t: nan_in(t, "learner.actor"), "'learner.actor' holds NaN"),
+    "NaN in Adam's state": (
+        lambda t: nan_in(t, "learner.critic_exp_avg"),
+        "'learner.critic_exp_avg' holds NaN",
+    ),
+    "infinity in the replay buffer": (
+        lambda t: nan_in(t, "replay.rows", np.inf),
+        "'replay.rows' holds NaN or infinite",
+    ),
+    "NaN in an observation": (lambda t: nan_in(t, "slots.obs"), "'slots.obs' holds NaN"),
+    "NaN in a start": (lambda t: nan_in(t, "searches.theta"), "'searches.theta' holds NaN"),
+    "NaN in a queued policy": (lambda t: nan_in(t, "pending.omega"), "'pending.omega' holds"),
+    "a negative second moment": (
+        lambda t: shaped(t, "learner.actor_exp_avg_sq", -t["learner.actor_exp_avg_sq"] - 1),
+        "negative Adam second moments",
+    ),
 }
+
+
+def nan_in(tensors: dict, name: str, value: float = np.nan) -> dict:
+    changed = tensors[name].clone()
+    changed.view(-1)[-1] = value
+    return shaped(tensors, name, changed)
 
 
 @pytest.mark.parametrize("case", TENSOR_CASES)
@@ -391,6 +437,41 @@ def test_plain_data_of_a_wrong_layout_is_refused(copy_of, case):
         load_inflight(checkpoint)
 
 
+def test_a_data_file_whose_format_is_a_tensor_is_refused(copy_of):
+    checkpoint, tensors, _ = copy_of
+    rewrite(
+        checkpoint,
+        payload={
+            "format": torch.tensor([3, 3]),
+            "write_id": checkpoint.write_id,
+            "tensors": tensors,
+        },
+    )
+    with pytest.raises(ValueError, match="not the data file its metadata describes"):
+        load_inflight(checkpoint)
+
+
+PLANTED_TENSORS = {
+    "a tensor as the format": lambda c, t: rewrite(
+        c, payload={"format": torch.tensor([FORMAT] * 2), "write_id": c.write_id, "tensors": t}
+    ),
+    "a Parameter": lambda c, t: rewrite(c, tensors=TENSOR_CASES["a Parameter"][0](t)),
+    "NaN in the simulator": lambda c, t: rewrite(c, tensors=nan_in(t, "sim.phi")),
+}
+
+
+@pytest.mark.parametrize("case", PLANTED_TENSORS)
+def test_planted_tensors_are_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    def plant(checkpoint):
+        tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
+        PLANTED_TENSORS[case](checkpoint, tensors)
+
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, plant)
+    assert "stale in-flight checkpoint removed" in log and "refused" in log
+
+
 def test_a_data_file_of_another_write_is_refused(copy_of):
     checkpoint, tensors, _ = copy_of
     rewrite(checkpoint, payload={"format": FORMAT, "write_id": "other", "tensors": tensors})
@@ -425,6 +506,432 @@ def test_a_planted_checkpoint_is_refused_by_a_resuming_experiment(
     want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
     pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
     assert not list((tmp_path / ".inflight").iterdir())
+
+
+# ------------------------------------------------------------------ crafted metadata
+
+DEEP = "[" * 100_000 + "]" * 100_000  # nested past any parser's recursion limit
+HUGE = 10**400  # an integer too large for a float
+
+
+def with_metadata(checkpoint, change) -> None:
+    """Rewrite ``checkpoint``'s metadata: ``change(meta)`` is the new mapping or text."""
+    meta = change(json.loads(checkpoint.metadata_path.read_text()))
+    checkpoint.metadata_path.write_text(meta if isinstance(meta, str) else json.dumps(meta))
+
+
+def with_search_value(meta: dict, **changes) -> dict:
+    return {**meta, "trainer": with_search(meta["trainer"], **changes)}
+
+
+JSON_CASES = {
+    "a huge p": (lambda m: {**m, "runs": [[HUGE, 0], *m["runs"][1:]]}, r"runs\[0\] p is too large"),
+    "a huge saved": (lambda m: {**m, "saved": HUGE}, "saved is too large for a float"),
+    "a huge clock": (lambda m: {**m, "clock": HUGE}, "clock is too large for a float"),
+    "a huge start time": (lambda m: with_search_value(m, started=HUGE), "started is too large"),
+    "a huge fitness": (lambda m: with_search_value(m, fitness=HUGE), "fitness is too large"),
+    "huge seconds": (lambda m: with_search_value(m, seconds=HUGE), "seconds is too large"),
+    "a huge best": (lambda m: with_search_value(m, best=[HUGE, 0.0]), "best is too large"),
+    "deep nesting": (lambda m: DEEP, "maximum recursion depth"),
+    "deep nesting inside": (
+        lambda m: json.dumps({**m, "trainer": 0}).replace('"trainer": 0', f'"trainer": {DEEP}'),
+        "maximum recursion depth",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", JSON_CASES)
+def test_crafted_metadata_is_refused_not_raised(copy_of, tmp_path, caplog, case):
+    """Numbers too large for a float and nesting past the parser's limit: refused with a
+    reason, when listed (every executor and ``lonlib status`` list checkpoints) or read."""
+    checkpoint, _, _ = copy_of
+    change, message = JSON_CASES[case]
+    with_metadata(checkpoint, change)
+    listed = inflight_checkpoints(tmp_path)
+    if listed:
+        with pytest.raises(ValueError, match=f"refused, .*{message}"):
+            load_inflight(*listed)
+    else:
+        assert re.search(f"refused in-flight checkpoint skipped .*{message}", caplog.text)
+
+
+@pytest.mark.parametrize("case", ["a huge p", "a huge start time", "deep nesting"])
+def test_crafted_metadata_is_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    change, message = JSON_CASES[case]
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, change))
+    assert re.search(f"in-flight checkpoint removed .*{message}", log)
+
+
+def resumed_despite(serial, tmp_path, monkeypatch, caplog, plant) -> str:
+    """A lockstep experiment killed mid-search, its checkpoint changed by ``plant``, then
+    resumed: it is refused (no traceback) and removed, the runs continue from their stored
+    trials to the uninterrupted results and nothing is created outside the experiment's
+    runs. The log."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    plant(checkpoint)
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_status(tmp_path)  # `lonlib status` lists the checkpoints too
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert "resumed" not in caplog.text and "Traceback" not in caplog.text
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert not list((tmp_path / ".inflight").iterdir())
+    folders = sorted(str(path.relative_to(tmp_path)) for path in tmp_path.glob("p=*/*"))
+    assert folders == ["p=0.001/run_0000", "p=0.001/run_0001"]
+    return caplog.text
+
+
+# ------------------------------------------------------------------ the runs it lists
+
+PLAN = ({P}, 3)  # the runs of an experiment of one p and three runs
+RUN_CASES = {  # the metadata's runs, or a search's tag: refused when listed, or when read
+    "p NaN": (lambda m: {**m, "runs": [[np.nan, 0], m["runs"][1]]}, r"runs\[0\] p must be finite"),
+    "p of another experiment": (
+        lambda m: {**m, "runs": [[0.5, 0], m["runs"][1]]},
+        "run 0 of p=0.5 is not one of this experiment's",
+    ),
+    "a negative run": (lambda m: {**m, "runs": [[P, -3], m["runs"][1]]}, r"run must be in \[0"),
+    "a run past the experiment's": (
+        lambda m: {**m, "runs": [m["runs"][0], [P, 7]]},
+        "run 7 of p=0.001 is not one of this experiment's",
+    ),
+    "a run as a fraction": (
+        lambda m: {**m, "runs": [[P, 0.5], m["runs"][1]]},
+        "must be an integer",
+    ),
+    "a run listed twice": (lambda m: {**m, "runs": [m["runs"][0]] * 2}, "listed twice"),
+    "negative trials": (lambda m: {**m, "trials": [-1, 0]}, r"trials must be in \[0"),
+    "negative steps": (lambda m: {**m, "steps": [-1, 125]}, r"steps must be in \[0"),
+    "a slot's run not listed": (
+        lambda m: {**m, "runs": [m["runs"][0], [P, 1]]},
+        "busy slots' searches are not the runs its metadata lists",
+    ),
+    "a slot's tag not a run": (
+        lambda m: with_search_value(m, tag="planted"),
+        "busy slots' searches are not the runs its metadata lists",
+    ),
+    "other env steps": (
+        lambda m: {**m, "steps": [m["steps"][0], 7]},
+        "env steps are not those its metadata lists",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", RUN_CASES)
+def test_runs_that_are_not_the_experiments_or_the_batchs_are_refused(
+    copy_of, tmp_path, caplog, case
+):
+    checkpoint, _, _ = copy_of
+    change, message = RUN_CASES[case]
+    with_metadata(checkpoint, change)
+    listed = inflight_checkpoints(tmp_path, PLAN)
+    if listed:
+        with pytest.raises(ValueError, match=f"refused, .*{message}"):
+            load_inflight(*listed)
+    else:
+        assert re.search(f"refused in-flight checkpoint skipped .*{message}", caplog.text)
+
+
+def test_a_run_of_an_earlier_sessions_configuration_is_the_experiments(tmp_path):
+    """A session may run fewer p values or runs than the experiment's manifest holds."""
+    config = SMALL
+    run_experiment(dataclasses.replace(config, max_local_searches=1), tmp_path, progress=False)
+    fewer = dataclasses.replace(config, runs=1, perturbations=(1e-4,))
+    perturbations, runs = experiment_plan(tmp_path, fewer)
+    assert (set(perturbations), runs) == ({1e-4, P}, 2)
+
+
+PLANTED_RUNS = {
+    "p NaN": lambda m: {**m, "runs": [[np.nan, 0], m["runs"][1]]},
+    "a run past the experiment's": lambda m: {**m, "runs": [m["runs"][0], [P, 7]]},
+    "a negative run": lambda m: {**m, "runs": [[P, -3], m["runs"][1]]},
+    "a slot's tag not listed": lambda m: with_search_value(m, tag=[P, 5]),
+}
+
+
+@pytest.mark.parametrize("case", PLANTED_RUNS)
+def test_runs_that_are_not_the_experiments_are_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    """Nothing is locked or created for a run that is not the experiment's (no p=nan/,
+    run_-003/ or run_0007/), and a slot training a run its metadata does not list is
+    refused, not resumed to a KeyError."""
+    plant = PLANTED_RUNS[case]
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, plant))
+    assert "in-flight checkpoint removed" in log and "refused" in log
+
+
+# ------------------------------------------------------------------ counters out of range
+
+
+def with_tensor(name: str, change):
+    """A tensor case: ``name`` replaced by ``change(tensor)``."""
+    return lambda t: shaped(t, name, change(t[name].clone()))
+
+
+def set_first(tensor, value):
+    tensor.view(-1)[0] = value
+    return tensor
+
+
+COUNTER_CASES = {
+    "negative steps": (with_tensor("slots.steps", lambda t: -t), r"slots.steps: slot 0"),
+    "steps past the budget": (
+        with_tensor("slots.steps", lambda t: t + CONFIG.ddpg.max_steps),
+        r"slots.steps: slot 0",
+    ),
+    "negative episodes": (with_tensor("slots.episodes", lambda t: -t), "slots.episodes: slot 0"),
+    "negative updates": (with_tensor("slots.updates", lambda t: -t), "slots.updates: slot 0"),
+    "more updates than steps": (
+        with_tensor("slots.updates", lambda t: t + 1000),
+        "slots.updates: slot 0",
+    ),
+    "negative loss count": (
+        with_tensor("slots.loss_count", lambda t: t - 100),
+        "slots.loss_count: slot 0",
+    ),
+    "negative last improvement": (
+        with_tensor("slots.last_improvement", lambda t: -t),
+        "slots.last_improvement: slot 0",
+    ),
+    "negative episode steps": (
+        with_tensor("sim.step_count", lambda t: set_first(t, -1)),
+        "sim.step_count: slot 0",
+    ),
+    "episode steps past the limit": (
+        with_tensor("sim.step_count", lambda t: set_first(t, CONFIG.env.steps + 1)),
+        "sim.step_count: slot 0",
+    ),
+    "an end reason that is none": (
+        with_tensor("sim.end_reason", lambda t: set_first(t, 77)),
+        "sim.end_reason: slot 0",
+    ),
+    "a busy slot's episode ended": (
+        with_tensor("sim.end_reason", lambda t: set_first(t, 2)),
+        "sim.end_reason: slot 0",
+    ),
+    "more upright steps than steps": (
+        with_tensor("sim.upright_sum", lambda t: t + 1000),
+        "sim.upright_sum: slot 0",
+    ),
+    "a negative episode in the history": (
+        with_tensor("searches.history", lambda t: set_first(t, -1)),
+        "searches.history: a negative count",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", COUNTER_CASES)
+def test_counters_no_search_reaches_are_refused(copy_of, case):
+    checkpoint, tensors, _ = copy_of
+    change, message = COUNTER_CASES[case]
+    rewrite(checkpoint, tensors=change(tensors))
+    with pytest.raises(ValueError, match=f"refused, .*{message}"):
+        load_inflight(checkpoint)
+
+
+PLAIN_COUNTER_CASES = {
+    "judge batch of a billion": (
+        lambda p: {**p, "judge_batch": 10**9},
+        r"judge_batch must be in \[1, 16\]",
+    ),
+    "judge batch zero": (lambda p: {**p, "judge_batch": 0}, r"judge_batch must be in \[1, 16\]"),
+    "fewer than queued": (lambda p: {**p, "judge_batch": 1}, "more queued than a step leaves"),
+    "a search's env steps past the budget": (
+        lambda p: with_search(p, env_steps=10**12),
+        r"env_steps must be in \[0, 240\]",
+    ),
+    "a search's negative env steps": (
+        lambda p: with_search(p, env_steps=-5),
+        r"env_steps must be in \[0, 240\]",
+    ),
+    "a search's updates past the budget": (
+        lambda p: with_search(p, updates=10**9),
+        r"updates must be in \[0, 240\]",
+    ),
+    "a search's infinite start time": (
+        lambda p: with_search(p, started=np.inf),
+        "started must be finite",
+    ),
+    "a search's negative seconds": (lambda p: with_search(p, seconds=-1.0), "seconds must be >= 0"),
+    "a search's NaN fitness": (
+        lambda p: with_search(p, fitness=np.nan),
+        "fitness must be a number",
+    ),
+    "a search's stop reason": (lambda p: with_search(p, stop_reason="x"), "stop_reason must be"),
+    "a search's episodes not its slot's": (
+        lambda p: with_search(p, episodes=0, pending=0),
+        "trainer.searches: slot 0",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", PLAIN_COUNTER_CASES)
+def test_plain_counters_no_search_reaches_are_refused(copy_of, case):
+    checkpoint, tensors, plain = copy_of
+    change, message = PLAIN_COUNTER_CASES[case]
+    changed = change(plain)
+    if case == "a search's episodes not its slot's":  # its history and queue go with it
+        tensors = {**tensors, "searches.history": tensors["searches.history"][3:]}
+        tensors["pending.theta"] = tensors["pending.theta"][:0]
+        tensors["pending.omega"] = tensors["pending.omega"][:0]
+        changed = {**changed, "pending": []}
+        changed["searches"][2] = {**changed["searches"][2], "pending": 0}
+        rewrite(checkpoint, tensors=tensors)
+    rewrite(checkpoint, trainer=changed)
+    with pytest.raises(ValueError, match=f"refused, .*{message}"):
+        load_inflight(checkpoint)
+
+
+@pytest.mark.parametrize(
+    "case", ["negative steps", "a busy slot's episode ended", "episode steps past the limit"]
+)
+def test_counters_no_search_reaches_are_refused_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog, case
+):
+    def plant(checkpoint):
+        tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
+        rewrite(checkpoint, tensors=COUNTER_CASES[case][0](tensors))
+
+    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, plant)
+    assert "stale in-flight checkpoint removed" in log and "no search reaches" in log
+
+
+def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
+    """The ranges refused above are the step loop's invariants: every state a batch writes
+    (searches starting, in their warm-up, training, ending, slots refilled or freed, the
+    start a candidate, ties broken) is read back."""
+    import lonlib.lockstep
+
+    ddpg = dataclasses.replace(CONFIG.ddpg, count_start=True, plateau_tiebreak=True)
+    config = dataclasses.replace(CONFIG, runs=3, max_local_searches=3, ddpg=ddpg)
+    read = []
+
+    def read_back(_path, trainer, _trials):  # what save_inflight writes, read as it is read
+        busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
+        plain, tensors = trainer.to_checkpoint()
+        plain = json.loads(json.dumps(plain))
+        runs, steps = [trainer.tags()[s] for s in busy], [int(trainer.steps[s]) for s in busy]
+        stored = StoredBatch(Path("x.pt"), plain, tensors, 0.0, tuple(runs), tuple(steps))
+        read.append(stored.trainer().slots)
+
+    monkeypatch.setattr(lonlib.lockstep, "save_inflight", read_back)
+    run_experiment(
+        config, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
+    )
+    assert len(read) > 500
+
+
+# ------------------------------------------------------------------ names
+
+
+def renamed(checkpoint, name: str, write_id: str | None = None) -> Path:
+    """``checkpoint`` moved to the batch id ``name`` (and write id): its metadata path."""
+    folder, write_id = checkpoint.metadata_path.parent, write_id or checkpoint.write_id
+    meta = json.loads(checkpoint.metadata_path.read_text())
+    meta |= {"write_id": write_id, "data": f"{name}.{write_id}.pt"}
+    checkpoint.metadata_path.unlink()
+    checkpoint.data_path.rename(folder / f"{name}.{write_id}.pt")
+    (folder / f"{name}.json").write_text(json.dumps(meta))
+    return folder / f"{name}.json"
+
+
+@pytest.mark.parametrize("name", ["*", "[0-9a-f]*", "0123456789AB"])
+def test_a_checkpoint_of_another_name_is_ignored_and_never_a_pattern(
+    copy_of, tmp_path, caplog, name
+):
+    checkpoint, _, _ = copy_of
+    folder = checkpoint.metadata_path.parent
+    meta = renamed(checkpoint, name)
+    others = [folder / "0123456789ab.0123456789ab.pt", folder / ".0123456789ab.json.x.tmp"]
+    for other in others:  # another batch's data file, and its write in progress
+        other.write_bytes(b"theirs")
+    assert inflight_checkpoints(tmp_path) == []
+    remove_leftovers(meta)
+    remove_inflight(meta)
+    assert all(other.exists() for other in others)
+    assert "not the name of an in-flight checkpoint" in caplog.text
+
+
+def test_a_write_id_that_is_a_path_is_refused(copy_of, tmp_path, caplog):
+    checkpoint, _, _ = copy_of
+    (checkpoint.metadata_path.parent / f"{checkpoint.name}.x").mkdir()
+    (tmp_path / "elsewhere").mkdir()  # the data file it names: outside the folder
+    renamed(checkpoint, checkpoint.name, write_id="x/../../elsewhere/y")
+    assert (tmp_path / "elsewhere" / "y.pt").exists()
+    assert inflight_checkpoints(tmp_path) == []
+    assert "write_id must be 12 hex digits" in caplog.text
+
+
+def test_a_checkpoint_named_as_a_pattern_is_ignored_by_a_resuming_experiment(
+    serial, tmp_path, monkeypatch, caplog
+):
+    """A metadata file named ``*.json`` is never read, nor its name used to find the files
+    of its batch: another batch's files stay; its runs continue from their stored trials."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    folder = checkpoint.metadata_path.parent
+    other = folder / "0123456789ab.0123456789ab.pt"  # another batch's
+    other.write_bytes(b"theirs")
+    planted = renamed(checkpoint, "*")
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
+    assert other.exists() and planted.exists()
+    assert "not the name of an in-flight checkpoint" in caplog.text
+    assert "resumed" not in caplog.text and "Traceback" not in caplog.text
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+
+
+# ------------------------------------------------------------------ other settings
+
+SETTINGS_CASES = {
+    "threads": ({"ddpg": {"threads": 2}}, "threads=2 (this session: 1)"),
+    "device": ({"ddpg": {"device": "cuda"}}, "device='cuda' (this session: 'cpu')"),
+    "two DDPG settings": (
+        {"ddpg": {"learning_rate": 0.01, "threads": 3}},
+        "learning_rate=0.01 (this session: 0.001), threads=3 (this session: 1)",
+    ),
+    "an environment setting": ({"env": {"steps": 41}}, "env.steps=41 (this session: 40)"),
+}
+
+
+@pytest.mark.parametrize("case", SETTINGS_CASES)
+def test_a_checkpoint_of_other_settings_names_those_that_differ(copy_of, case):
+    checkpoint, _, plain = copy_of
+    changes, differ = SETTINGS_CASES[case]
+    rewrite(checkpoint, trainer={**plain, **{k: {**plain[k], **v} for k, v in changes.items()}})
+    with pytest.raises(OtherSettings) as raised:
+        check_settings(checkpoint, read_inflight(checkpoint), CONFIG.env, CONFIG.ddpg)
+    assert f"in-flight checkpoint trained with {differ}: resume with those" in str(raised.value)
+    with pytest.raises(OtherSettings, match=re.escape(differ)):  # nor split with them
+        split_inflight(checkpoint, 2, (CONFIG.env, CONFIG.ddpg))
+    assert inflight_checkpoints(checkpoint.metadata_path.parent.parent) == [checkpoint]
+
+
+def test_a_checkpoint_of_other_settings_is_kept_by_resuming_processes(
+    serial, tmp_path, monkeypatch, caplog, capfd
+):
+    """Processes resuming a checkpoint split it only if it was trained with their settings:
+    built with its own it would set this process's torch threads (and split a batch that
+    none of them continues)."""
+    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    (checkpoint,) = inflight_checkpoints(tmp_path)
+    trainer = load_inflight(checkpoint)
+    trainer.hp = dataclasses.replace(trainer.hp, threads=2)
+    save_inflight(checkpoint.metadata_path, trainer, dict.fromkeys(checkpoint.runs, 0))
+    threads = torch.get_num_threads()
+    with caplog.at_level("INFO", logger="lonlib"):
+        run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2, workers=2)
+    assert torch.get_num_threads() == threads
+    assert "trained with threads=2 (this session: 1): resume with those" in caplog.text
+    assert "resumed" not in caplog.text + capfd.readouterr().err
+    want = serial[0][(serial[0]["p"] == P) & (serial[0]["run"] < 2)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored(tmp_path)[0], want)
+    assert not inflight_checkpoints(tmp_path)  # its runs ended: removed
 
 
 # ------------------------------------------------------------------ a format version

@@ -345,7 +345,7 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
         assert "resumed 1 searches in flight (70 env steps)" in log
         assert "1 whose runs went on since restart" in log
     elif change == "threads":
-        assert "trained with device='cpu', threads=2" in log and "resumed" not in log
+        assert "trained with threads=2 (this session: 1)" in log and "resumed" not in log
     else:
         assert "stale in-flight checkpoint removed" in log and "resumed" not in log
     want = serial[0][(serial[0]["p"] == 1e-3) & (serial[0]["run"] < 2)].reset_index(drop=True)
@@ -361,9 +361,10 @@ def fake_checkpoint(out, runs, trials):
 
     folder = out / ".inflight"
     folder.mkdir(exist_ok=True)
-    meta = {"format": FORMAT, "write_id": "x", "data": "a.x.pt", "saved": 0, "runs": runs}
-    meta |= {"trials": trials, "steps": [10] * len(runs)}
-    (folder / "a.json").write_text(json.dumps(meta))
+    batch, write = "0123456789ab", "ba9876543210"  # ids as lonlib makes them
+    meta = {"format": FORMAT, "write_id": write, "data": f"{batch}.{write}.pt", "saved": 0}
+    meta |= {"runs": runs, "trials": trials, "steps": [10] * len(runs)}
+    (folder / f"{batch}.json").write_text(json.dumps(meta))
     return folder
 
 

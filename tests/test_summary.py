@@ -80,9 +80,13 @@ def test_the_summary_counts_what_is_stored_per_p(experiment):
 def test_the_summary_counts_searches_in_flight_once_per_run(experiment):
     folder = experiment / ".inflight"
     folder.mkdir()
-    checkpoints = {"a": ([[1e-3, 1], [1e-4, 2]], [5000, 7000]), "b": ([[1e-4, 2]], [6000])}
+    checkpoints = {  # named by batch ids, as lonlib names them
+        "00000000000a": ([[1e-3, 1], [1e-4, 2]], [5000, 7000]),
+        "00000000000b": ([[1e-4, 2]], [6000]),
+    }
     for name, (runs, steps) in checkpoints.items():
-        payload = {"format": FORMAT, "write_id": "w", "data": f"{name}.w.pt", "saved": 0.0}
+        write = "00000000000f"
+        payload = {"format": FORMAT, "write_id": write, "data": f"{name}.{write}.pt", "saved": 0.0}
         payload.update(runs=runs, trials=[1] * len(runs), steps=steps)
         write_json(folder / f"{name}.json", payload)
     summary = experiment_summary(experiment).set_index("p")
