@@ -261,7 +261,10 @@ def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:
 def read_trials(path: Path) -> pd.DataFrame:
     """Read one run's trials table, checking its columns (CorruptDataError names the file)."""
     try:
-        table = pd.read_parquet(path)
+        # One read of the whole file, then parse: pyarrow takes a path's size and its
+        # contents in two steps, and a writer's atomic rename between them (a run storing
+        # its next search while `lonlib status` reads) would look like a damaged file.
+        table = pd.read_parquet(io.BytesIO(path.read_bytes()))
     except Exception as error:  # pyarrow raises several types for a damaged file
         raise CorruptDataError(f"{path}: cannot read the trials table ({error})") from error
     missing = set(TRIAL_COLUMNS) - set(table.columns)

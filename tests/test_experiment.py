@@ -25,6 +25,7 @@ from lonlib.store import (
     history_path,
     optimum_path,
     read_optimum,
+    read_trials,
     trials_path,
 )
 from tests.conftest import write_tiny_yaml
@@ -119,12 +120,12 @@ def test_sigkill_then_resume_gives_the_uninterrupted_trials(longer_searches, tmp
     first = trials_path(out, 1e-3, 0)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:
-        if first.exists() and len(pd.read_parquet(first)) >= 2:
+        if first.exists() and len(read_trials(first)) >= 2:
             break
         time.sleep(0.05)
     os.killpg(process.pid, signal.SIGKILL)
     process.wait()
-    partial = pd.read_parquet(first)
+    partial = read_trials(first)
     assert len(partial) >= 2 and len(expected) > len(partial)
     resumed = run_experiment(config, out, progress=False)
     pd.testing.assert_frame_equal(resumed[COMPARED], expected[COMPARED])
@@ -215,7 +216,7 @@ def test_a_killed_pool_worker_is_retried_and_its_run_resumes(longer_searches, tm
     deadline = time.monotonic() + 120
     killed = None
     while killed is None and time.monotonic() < deadline:
-        if any(len(pd.read_parquet(p)) >= 1 for p in out.glob("p=*/run_*/trials.parquet")):
+        if any(len(read_trials(p)) >= 1 for p in out.glob("p=*/run_*/trials.parquet")):
             workers = [
                 child
                 for child in psutil.Process().children(recursive=True)
