@@ -28,6 +28,7 @@ from lonlib.rollout import (
     Rollout,
     Scoring,
     actor_policy,
+    conditioning_batch,
     nominal_offsets,
     perturbed_offsets,
     run_policy,
@@ -170,10 +171,7 @@ def describe_actors(
     starts); descriptor ``b`` equals ``describe(thetas[b])`` bit for bit."""
     thetas = np.atleast_2d(np.asarray(thetas))
     k, m = thetas.shape[0], scoring.starts
-    nominal = nominal_offsets(config, scoring.eval_seed)
-    perturbed = perturbed_offsets(config, m, scoring.noise, scoring.seed, scoring.eval_seed)
-    offsets = np.concatenate([np.repeat(nominal, k, axis=1), np.tile(perturbed, (1, k, 1))], axis=1)
-    batch = np.concatenate([thetas, np.repeat(thetas, m, axis=0)])
+    batch, offsets = conditioning_batch(thetas, config, scoring)
     result = run_policy(actor_policy(batch, config), config, offsets, trace=k)
     robust = result.fitness[k:].reshape(k, m)
     return [describe_rollout(result, config, b, robust[b]) for b in range(k)]

@@ -293,12 +293,7 @@ def score_actors(
         result = run_actors(thetas, config, np.repeat(nominal, rows, axis=1))
         return Scores(result.fitness, result, None, None, None)
     m = scoring.starts
-    perturbed = perturbed_offsets(config, m, scoring.noise, scoring.seed, scoring.eval_seed)
-    # rows first, then row b's M perturbed starts at rows + b * M ... (one batch)
-    offsets = np.concatenate(
-        [np.repeat(nominal, rows, axis=1), np.tile(perturbed, (1, rows, 1))], axis=1
-    )
-    batch = np.concatenate([thetas, np.repeat(thetas, m, axis=0)])
+    batch, offsets = conditioning_batch(thetas, config, scoring)
     result = run_actors(batch, config, offsets)
     head = Rollout(*(getattr(result, name)[:rows] for name in _ROLLOUT_ARRAYS))
     robust = result.fitness[rows:].reshape(rows, m)
@@ -310,6 +305,19 @@ def score_actors(
         robust_min=robust.min(axis=1),
         robust_std=np.sqrt(_sequential_mean((robust - mean[:, None]) ** 2)),
     )
+
+
+def conditioning_batch(
+    thetas: np.ndarray, config: PendulumConfig, scoring: Scoring
+) -> tuple[np.ndarray, np.ndarray]:
+    """Actors ``[k (1 + M), P]`` and starts ``[4, k (1 + M), n]`` of one batched rollout:
+    rows ``0..k-1`` each Actor from the nominal start, then Actor ``b``'s ``M`` perturbed
+    starts at rows ``k + b M ... k + (b + 1) M - 1``."""
+    k, m = thetas.shape[0], scoring.starts
+    nominal = nominal_offsets(config, scoring.eval_seed)
+    perturbed = perturbed_offsets(config, m, scoring.noise, scoring.seed, scoring.eval_seed)
+    offsets = np.concatenate([np.repeat(nominal, k, axis=1), np.tile(perturbed, (1, k, 1))], axis=1)
+    return np.concatenate([thetas, np.repeat(thetas, m, axis=0)]), offsets
 
 
 def _sequential_mean(values: np.ndarray) -> np.ndarray:
