@@ -328,9 +328,10 @@ def test_notebooks_run_all_with_their_defaults_in_jupyterlab(project, lab, brows
     assert not (project / "notebooks" / "data").exists()  # the kernel runs in notebooks/
     _screenshot(browser, "sample_lon", tmp_path, f"{PANEL} .widget-hprogress", "start")
 
-    # One p sampled: Fig. 2, and Figs. 3 (PNG + interactive), 4 and 5 for it.
+    # One p sampled: Fig. 2, and Figs. 3 (PNG + interactive), 4 and 5 for it; then the
+    # conditioning: Figs. 4 and 5 on the robust estimate and the retention curve.
     _run_all(browser, "analyse_lon")
-    _check_outputs(browser, project / "notebooks" / "analyse_lon.ipynb", images=4, plots=1)
+    _check_outputs(browser, project / "notebooks" / "analyse_lon.ipynb", images=7, plots=1)
     _screenshot(browser, "analyse_lon", tmp_path, focus=f"{PANEL} .js-plotly-plot")
 
     _run_all(browser, "record_optima")
