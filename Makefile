@@ -15,7 +15,7 @@ UV     := uv==0.13.9
 # (requirements/all.txt; a docs extra gets its line in `lock`). torch stays out of it:
 # installed first, the CPU build.
 REQ    := requirements
-LOCK_FILES := $(foreach lock,all base dev lab bench,$(REQ)/$(lock).txt)
+LOCK_FILES := $(foreach lock,all base dev docs lab bench,$(REQ)/$(lock).txt)
 # Where uv finds torch's CPU wheel when resolving its dependencies (pip's find-links here).
 TORCH_FIND_LINKS ?= $(or $(PIP_FIND_LINKS),https://download.pytorch.org/whl/cpu/torch/)
 LOCK_UPGRADE ?= --upgrade
@@ -121,9 +121,10 @@ lock: setup
 	$(BIN)/python -m pip install --quiet $(UV)
 	$(UV_COMPILE) $(LOCK_UPGRADE) --all-extras -o $(REQ)/all.txt
 	$(UV_COMPILE) -c $(REQ)/all.txt -o $(REQ)/base.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev -o $(REQ)/dev.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra lab -o $(REQ)/lab.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra bench -o $(REQ)/bench.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs -o $(REQ)/dev.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra docs -o $(REQ)/docs.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra lab -o $(REQ)/lab.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra bench -o $(REQ)/bench.txt
 	$(BIN)/python $(REQ)/environment_yml.py $(REQ)/dev.txt $(TORCH) > environment.yml
 	@! grep -iE '^(torch|triton|nvidia-)' $(LOCK_FILES) || { echo "torch/CUDA in the lock"; exit 1; }
 
