@@ -98,7 +98,9 @@ def cell_table(searches: pd.DataFrame, records: list[dict[str, Any]]) -> pd.Data
     return pd.DataFrame(rows, columns=CELL_COLUMNS)
 
 
-README_BEGIN = "<!-- calibration:begin (lonlib calibrate data/calibration --readme README.md) -->"
+README_BEGIN = (
+    "<!-- calibration:begin (lonlib calibrate data/calibration --docs docs/calibration.md) -->"
+)
 README_END = "<!-- calibration:end -->"
 
 
@@ -108,6 +110,19 @@ def readme_markers(grid: str) -> tuple[str, str]:
     if grid == "default":
         return README_BEGIN, README_END
     return f"<!-- calibration-{grid}:begin -->", f"<!-- calibration-{grid}:end -->"
+
+
+DRIFT_HEADER = "| integrator | steps |"
+
+
+def calibration_block(source: str | Path, table: str, grid: str) -> str:
+    """The block ``lonlib calibrate --docs`` pastes for ``grid``: a line naming the folder
+    ``source``, then ``table`` (``calibration.md``). The integrator drift table does not
+    depend on the grid's cells, so only the default grid's block keeps it (the docs print it
+    once)."""
+    if grid != "default" and DRIFT_HEADER in table:
+        table = table[: table.index(DRIFT_HEADER)]
+    return f"*Generated from `{source}` by `lonlib calibrate`.*\n\n{table.strip()}\n"
 
 
 def _kilo(steps: float) -> str:

@@ -13,7 +13,7 @@ from lonlib.store import p_label
 
 CLAIM_COLUMNS = {"claim": "claim", "paper": "the paper says", "evidence": "evidence"}
 PEAK_COLUMNS = ("paper_peak", "nearest_detected", "distance")
-README_BEGIN = "<!-- claims:begin (lonlib analyse data/reference --readme README.md) -->"
+README_BEGIN = "<!-- claims:begin (lonlib analyse data/reference --docs docs/results.md) -->"
 README_END = "<!-- claims:end -->"
 
 

@@ -13,7 +13,7 @@ from lonlib.experiment import run_status
 from lonlib.readme_tables import splice_generated
 from lonlib.store import p_label, read_finished_trials
 
-README_BEGIN = "<!-- summary:begin (lonlib analyse data/reference --readme README.md) -->"
+README_BEGIN = "<!-- summary:begin (lonlib analyse data/reference --docs docs/results.md) -->"
 README_END = "<!-- summary:end -->"
 
 
