@@ -38,7 +38,7 @@ comma := ,
 BROWSER_TEST := $(if $(and $(CHROMIUM),$(shell command -v chromedriver 2>/dev/null)),yes)
 
 .PHONY: help setup test test-browser test-latest lock bench lab lint format clean reproduce \
-	figures mutants
+	figures mutants docs
 
 help:
 	@echo "make setup   create $(VENV) and install the lock $(REQ)/dev.txt + lonlib (idempotent)"
@@ -57,6 +57,8 @@ help:
 	@echo "make figures [EXPERIMENT=data/reference]  every figure and table of a stored"
 	@echo "             experiment again, with the paper's claims tested (never samples)"
 	@echo "make lab     set up, then start JupyterLab on the project (opens at notebooks/)"
+	@echo "make docs    set up, then build the documentation site into site/ (offline, --strict;"
+	@echo "             tests/test_docs.py builds it in make test)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check"
 	@echo "make clean   remove $(VENV), $(LATEST) and caches (never data/)"
@@ -187,11 +189,16 @@ reproduce: setup
 	echo "  recordings/   rerun .rrd files: view with  $(BIN)/rerun $(OUT)/recordings/<file>.rrd"; \
 	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
 
+# The documentation site (MkDocs + mkdocstrings, docs/ and mkdocs.yml): offline, and --strict so
+# that a broken link or reference fails (make test builds it too: tests/test_docs.py).
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 # Analysis only: figures, tables and the claims table from stored runs (lonlib.analysis, the
 # code the analyse_lon notebook runs); refuses a folder without an experiment.
 figures: setup
 	$(BIN)/lonlib analyse $(EXPERIMENT)
 
 clean:
-	rm -rf $(VENV) $(LATEST) .pytest_cache .ruff_cache build *.egg-info
+	rm -rf $(VENV) $(LATEST) .pytest_cache .ruff_cache build site *.egg-info
 	find . -name __pycache__ -type d -not -path './data/*' -prune -exec rm -rf {} +
