@@ -10,7 +10,7 @@ TORCH  := torch==2.13.0+cpu
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 PIP    := pip==26.3
 UV     := uv==0.13.9
-# The lock (README, "Environment, lock and reproducibility"): exact versions with hashes, one
+# The lock (docs/environment.md): exact versions with hashes, one
 # file per install (base; base + dev; + lab; + bench), all projections of one resolution
 # (requirements/all.txt; a docs extra gets its line in `lock`). torch stays out of it:
 # installed first, the CPU build.

@@ -3,7 +3,7 @@
 :func:`write_outputs` reads the cells :func:`lonlib.calibration.run_calibration` stored and
 writes ``calibration.csv`` (one row per cell, :func:`cell_table`), ``searches.csv`` (one row
 per search, :func:`search_table`), ``drift.csv`` (:func:`lonlib.calibration.integrator_drift`),
-``calibration.md`` (:func:`calibration_markdown`, the README's table) and ``calibration.png``
+``calibration.md`` (:func:`calibration_markdown`, the table of docs/calibration.md) and ``calibration.png``
 (:func:`calibration_figure`).
 """
 
@@ -131,7 +131,7 @@ def _kilo(steps: float) -> str:
 
 def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
     """The cell table and the integrator drift as Markdown (``calibration.md``, and the
-    README's table via ``lonlib calibrate OUT --readme README.md``)."""
+    table of docs/calibration.md via ``lonlib calibrate OUT --docs docs/calibration.md``)."""
 
     def steps(row: pd.Series, event: str = "nonzero") -> str:
         if pd.isna(row[f"first_{event}_steps_median"]):
