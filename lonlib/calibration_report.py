@@ -3,8 +3,8 @@
 :func:`write_outputs` reads the cells :func:`lonlib.calibration.run_calibration` stored and
 writes ``calibration.csv`` (one row per cell, :func:`cell_table`), ``searches.csv`` (one row
 per search, :func:`search_table`), ``drift.csv`` (:func:`lonlib.calibration.integrator_drift`),
-``calibration.md`` (:func:`calibration_markdown`, the table of docs/calibration.md) and ``calibration.png``
-(:func:`calibration_figure`).
+``calibration.md`` (:func:`calibration_markdown`, the table of docs/calibration.md) and
+``calibration.png`` (:func:`calibration_figure`).
 """
 
 from __future__ import annotations
