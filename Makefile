@@ -10,10 +10,10 @@ TORCH  := torch==2.13.0+cpu
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 PIP    := pip==26.3
 UV     := uv==0.13.9
-# The lock (docs/environment.md): exact versions with hashes, one
-# file per install (base; base + dev; + lab; + bench), all projections of one resolution
-# (requirements/all.txt; a docs extra gets its line in `lock`). torch stays out of it:
-# installed first, the CPU build.
+# The lock (docs/environment.md): exact versions with hashes, one file per install (base;
+# base + dev + docs, since make test builds the site; base + docs; + lab; + bench), all
+# projections of one resolution (requirements/all.txt). torch stays out of it: installed
+# first, the CPU build.
 REQ    := requirements
 LOCK_FILES := $(foreach lock,all base dev docs lab bench,$(REQ)/$(lock).txt)
 # Where uv finds torch's CPU wheel when resolving its dependencies (pip's find-links here).
@@ -108,7 +108,7 @@ test-latest:
 	$(call install_torch,$(LATEST)/bin)
 	echo "$(TORCH)" > $(LATEST)/torch-constraint.txt
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
-	  -c $(LATEST)/torch-constraint.txt -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
+	  -c $(LATEST)/torch-constraint.txt -e ".[dev,docs$(if $(BROWSER_TEST),$(comma)lab)]"
 	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
 	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
 	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
