@@ -10,12 +10,12 @@ TORCH  := torch==2.13.0+cpu
 TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 PIP    := pip==26.3
 UV     := uv==0.13.9
-# The lock (README, "Environment, lock and reproducibility"): exact versions with hashes, one
-# file per install (base; base + dev; + lab; + bench), all projections of one resolution
-# (requirements/all.txt; a docs extra gets its line in `lock`). torch stays out of it:
-# installed first, the CPU build.
+# The lock (docs/environment.md): exact versions with hashes, one file per install (base;
+# base + dev + docs, since make test builds the site; base + docs; + lab; + bench), all
+# projections of one resolution (requirements/all.txt). torch stays out of it: installed
+# first, the CPU build.
 REQ    := requirements
-LOCK_FILES := $(foreach lock,all base dev lab bench,$(REQ)/$(lock).txt)
+LOCK_FILES := $(foreach lock,all base dev docs lab bench,$(REQ)/$(lock).txt)
 # Where uv finds torch's CPU wheel when resolving its dependencies (pip's find-links here).
 TORCH_FIND_LINKS ?= $(or $(PIP_FIND_LINKS),https://download.pytorch.org/whl/cpu/torch/)
 LOCK_UPGRADE ?= --upgrade
@@ -38,7 +38,7 @@ comma := ,
 BROWSER_TEST := $(if $(and $(CHROMIUM),$(shell command -v chromedriver 2>/dev/null)),yes)
 
 .PHONY: help setup test test-browser test-latest lock bench lab lint format clean reproduce \
-	figures mutants
+	figures mutants docs
 
 help:
 	@echo "make setup   create $(VENV) and install the lock $(REQ)/dev.txt + lonlib (idempotent)"
@@ -57,6 +57,8 @@ help:
 	@echo "make figures [EXPERIMENT=data/reference]  every figure and table of a stored"
 	@echo "             experiment again, with the paper's claims tested (never samples)"
 	@echo "make lab     set up, then start JupyterLab on the project (opens at notebooks/)"
+	@echo "make docs    set up, then build the documentation site into site/ (offline, --strict;"
+	@echo "             tests/test_docs.py builds it in make test)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check"
 	@echo "make clean   remove $(VENV), $(LATEST) and caches (never data/)"
@@ -106,7 +108,7 @@ test-latest:
 	$(call install_torch,$(LATEST)/bin)
 	echo "$(TORCH)" > $(LATEST)/torch-constraint.txt
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
-	  -c $(LATEST)/torch-constraint.txt -e ".[dev$(if $(BROWSER_TEST),$(comma)lab)]"
+	  -c $(LATEST)/torch-constraint.txt -e ".[dev,docs$(if $(BROWSER_TEST),$(comma)lab)]"
 	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
 	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
 	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
@@ -121,9 +123,10 @@ lock: setup
 	$(BIN)/python -m pip install --quiet $(UV)
 	$(UV_COMPILE) $(LOCK_UPGRADE) --all-extras -o $(REQ)/all.txt
 	$(UV_COMPILE) -c $(REQ)/all.txt -o $(REQ)/base.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev -o $(REQ)/dev.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra lab -o $(REQ)/lab.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra bench -o $(REQ)/bench.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs -o $(REQ)/dev.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra docs -o $(REQ)/docs.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra lab -o $(REQ)/lab.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra bench -o $(REQ)/bench.txt
 	$(BIN)/python $(REQ)/environment_yml.py $(REQ)/dev.txt $(TORCH) > environment.yml
 	@! grep -iE '^(torch|triton|nvidia-)' $(LOCK_FILES) || { echo "torch/CUDA in the lock"; exit 1; }
 
@@ -186,11 +189,16 @@ reproduce: setup
 	echo "  recordings/   rerun .rrd files: view with  $(BIN)/rerun $(OUT)/recordings/<file>.rrd"; \
 	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
 
+# The documentation site (MkDocs + mkdocstrings, docs/ and mkdocs.yml): offline, and --strict so
+# that a broken link or reference fails (make test builds it too: tests/test_docs.py).
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 # Analysis only: figures, tables and the claims table from stored runs (lonlib.analysis, the
 # code the analyse_lon notebook runs); refuses a folder without an experiment.
 figures: setup
 	$(BIN)/lonlib analyse $(EXPERIMENT)
 
 clean:
-	rm -rf $(VENV) $(LATEST) .pytest_cache .ruff_cache build *.egg-info
+	rm -rf $(VENV) $(LATEST) .pytest_cache .ruff_cache build site *.egg-info
 	find . -name __pycache__ -type d -not -path './data/*' -prune -exec rm -rf {} +

@@ -184,7 +184,7 @@ def training_rows() -> list[dict]:
 
 
 def markdown(update: list[dict], training: list[dict], load: tuple[float, float]) -> str:
-    """The README's DDPG speed table (``benchmarks/results/ddpg.md``)."""
+    """The DDPG speed table of docs/performance.md (``benchmarks/results/ddpg.md``)."""
     lines = [
         "| DDPG, one torch thread | lean: median (fastest) | autograd: median (fastest) "
         "| lean speed-up | target (k = 1, median) |",

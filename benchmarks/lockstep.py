@@ -149,7 +149,7 @@ def projection_rows(scaling: list[dict]) -> list[dict]:
 
 
 def markdown(scaling: list[dict], executors: list[dict], projection: list[dict]) -> str:
-    """The README's lockstep tables (``benchmarks/results/lockstep.md``)."""
+    """The lockstep tables of docs/performance.md (``benchmarks/results/lockstep.md``)."""
     lines = ["| device | batch | " + " | ".join(f"K = {k}" for k in KS) + " |"]
     lines.append("|---|---|" + "---|" * len(KS))
     for device in dict.fromkeys(r["device"] for r in scaling):

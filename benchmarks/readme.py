@@ -1,7 +1,7 @@
-"""`python -m benchmarks.readme`: paste the generated speed tables into README.md.
+"""`python -m benchmarks.readme`: paste the generated speed tables into docs/performance.md.
 
 `make bench` writes ``benchmarks/results/ddpg.md`` and ``lockstep.md``; this replaces the
-README's lines between the ``ddpg-speed`` and ``lockstep-speed`` markers with them, so the
+page's lines between the ``ddpg-speed`` and ``lockstep-speed`` markers with them, so the
 tables are never typed by hand. A table whose result file is missing is left as it is.
 """
 
@@ -12,7 +12,7 @@ from pathlib import Path
 from benchmarks.common import RESULTS
 from lonlib.readme_tables import splice as splice_between
 
-README = Path(__file__).parents[1] / "README.md"
+README = Path(__file__).parents[1] / "docs" / "performance.md"
 BEGIN, END = "<!-- ddpg-speed:begin (python -m benchmarks.readme) -->", "<!-- ddpg-speed:end -->"
 TABLES = {
     "ddpg.md": (BEGIN, END),
@@ -29,12 +29,12 @@ def splice(readme: str, table: str) -> str:
 
 
 def main() -> None:
-    """Rewrite README.md's speed tables from ``benchmarks/results/``."""
+    """Rewrite docs/performance.md's speed tables from ``benchmarks/results/``."""
     readme = README.read_text()
     for name, (begin, end) in TABLES.items():
         if (RESULTS / name).exists():
             readme = splice_between(readme, begin, end, (RESULTS / name).read_text())
-            print(f"README.md: table replaced from {RESULTS / name}")
+            print(f"{README}: table replaced from {RESULTS / name}")
     README.write_text(readme)
 
 

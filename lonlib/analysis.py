@@ -48,6 +48,7 @@ from lonlib.plots import (
     optima_boxplot,
     retention_plot,
     save_html,
+    save_png,
     sensitivity,
 )
 from lonlib.record import record, recording_name
@@ -118,8 +119,7 @@ def analyse(
     result = Analysis(metrics=pd.DataFrame(), peaks=pd.DataFrame())
 
     def save(name: str, fig: plt.Figure) -> None:
-        path = out / f"{name}.png"
-        fig.savefig(path, dpi=120)
+        path = save_png(fig, out / f"{name}.png")
         result.files.append(path)
         result.figures[name] = fig
         if close_figures:

@@ -3,13 +3,12 @@
 :func:`write_outputs` reads the cells :func:`lonlib.calibration.run_calibration` stored and
 writes ``calibration.csv`` (one row per cell, :func:`cell_table`), ``searches.csv`` (one row
 per search, :func:`search_table`), ``drift.csv`` (:func:`lonlib.calibration.integrator_drift`),
-``calibration.md`` (:func:`calibration_markdown`, the README's table) and ``calibration.png``
-(:func:`calibration_figure`).
+``calibration.md`` (:func:`calibration_markdown`, the table of docs/calibration.md) and
+``calibration.png`` (:func:`calibration_figure`).
 """
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from lonlib.calibration import (
     integrator_drift,
     read_cell,
 )
+from lonlib.plots import calibration_figure, png_bytes  # noqa: F401 (re-exported)
 from lonlib.store import atomic_write
 
 
@@ -98,7 +98,9 @@ def cell_table(searches: pd.DataFrame, records: list[dict[str, Any]]) -> pd.Data
     return pd.DataFrame(rows, columns=CELL_COLUMNS)
 
 
-README_BEGIN = "<!-- calibration:begin (lonlib calibrate data/calibration --readme README.md) -->"
+README_BEGIN = (
+    "<!-- calibration:begin (lonlib calibrate data/calibration --docs docs/calibration.md) -->"
+)
 README_END = "<!-- calibration:end -->"
 
 
@@ -110,13 +112,26 @@ def readme_markers(grid: str) -> tuple[str, str]:
     return f"<!-- calibration-{grid}:begin -->", f"<!-- calibration-{grid}:end -->"
 
 
+DRIFT_HEADER = "| integrator | steps |"
+
+
+def calibration_block(source: str | Path, table: str, grid: str) -> str:
+    """The block ``lonlib calibrate --docs`` pastes for ``grid``: a line naming the folder
+    ``source``, then ``table`` (``calibration.md``). The integrator drift table does not
+    depend on the grid's cells, so only the default grid's block keeps it (the docs print it
+    once)."""
+    if grid != "default" and DRIFT_HEADER in table:
+        table = table[: table.index(DRIFT_HEADER)]
+    return f"*Generated from `{source}` by `lonlib calibrate`.*\n\n{table.strip()}\n"
+
+
 def _kilo(steps: float) -> str:
     return f"{steps / 1000:.0f}k" if steps >= 1000 else f"{steps:.0f}"
 
 
 def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
     """The cell table and the integrator drift as Markdown (``calibration.md``, and the
-    README's table via ``lonlib calibrate OUT --readme README.md``)."""
+    table of docs/calibration.md via ``lonlib calibrate OUT --docs docs/calibration.md``)."""
 
     def steps(row: pd.Series, event: str = "nonzero") -> str:
         if pd.isna(row[f"first_{event}_steps_median"]):
@@ -155,39 +170,6 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
-def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) -> plt.Figure:
-    """Left: best greedy fitness of every search per cell. Right: the best greedy fitness
-    so far against env steps, one line per search, one colour per cell."""
-    names = [record["name"] for record in records]
-    fig, (left, right) = plt.subplots(
-        1, 2, figsize=(13, max(3.5, 1.5 + 0.4 * len(names))), gridspec_kw={"width_ratios": [1, 1]}
-    )
-    colours = plt.get_cmap("tab20")(np.linspace(0, 1, max(len(names), 2)))
-    for row, (name, colour) in enumerate(zip(names, colours, strict=False)):
-        group = searches[searches["cell"] == name]
-        offsets = 0.15 * (np.arange(len(group)) - (len(group) - 1) / 2)  # seeds side by side
-        left.scatter(group["best_fitness"], row + offsets, color=colour, s=25)
-        share = (group["best_fitness"] > 0).mean()
-        left.annotate(f"{share:.0%} left 0", (1.0, row), fontsize=7, va="center", ha="right")
-    for record, colour in zip(records, colours, strict=False):
-        for i, search in enumerate(record["searches"]):
-            steps = np.asarray(search["history_env_steps"], dtype=float)
-            fitness = np.fmax.accumulate(np.asarray(search["history_greedy_fitness"], dtype=float))
-            label = record["name"] if i == 0 else None
-            right.step(steps, fitness, where="post", color=colour, lw=1, label=label)
-    left.set_yticks(range(len(names)), names, fontsize=8)
-    left.set_ylim(len(names) - 0.5, -0.5)
-    left.set_xlim(-0.02, 1.02)
-    left.set_xlabel("best greedy fitness per search")
-    right.set_xlabel("environment steps")
-    right.xaxis.set_major_formatter(plt.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
-    right.set_ylabel("best greedy fitness so far")
-    right.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
-    fig.suptitle("Calibration: which physics lets DDPG leave zero")
-    fig.tight_layout()
-    return fig
-
-
 @dataclass
 class CalibrationResult:
     """What :func:`run_calibration` wrote: the tables, the figure and the file paths."""
@@ -216,7 +198,5 @@ def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResu
     files.append(out / "calibration.md")
     atomic_write(files[-1], calibration_markdown(cells, drift).encode())
     png = out / "calibration.png"
-    image = io.BytesIO()
-    figure.savefig(image, dpi=120, format="png")
-    atomic_write(png, image.getvalue())
+    atomic_write(png, png_bytes(figure))
     return CalibrationResult(cells, searches, drift, figure, [*files, png])

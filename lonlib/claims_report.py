@@ -13,7 +13,7 @@ from lonlib.store import p_label
 
 CLAIM_COLUMNS = {"claim": "claim", "paper": "the paper says", "evidence": "evidence"}
 PEAK_COLUMNS = ("paper_peak", "nearest_detected", "distance")
-README_BEGIN = "<!-- claims:begin (lonlib analyse data/reference --readme README.md) -->"
+README_BEGIN = "<!-- claims:begin (lonlib analyse data/reference --docs docs/results.md) -->"
 README_END = "<!-- claims:end -->"
 
 
@@ -176,5 +176,5 @@ def write_claims(
 def splice_readme(readme: str, markdown: str, source: str) -> str:
     """``readme`` with the text between :data:`README_BEGIN` and :data:`README_END`
     replaced by ``markdown`` and a line naming the experiment folder ``source`` it came
-    from, so the README's claims table is generated, never typed."""
+    from, so the claims table of docs/results.md is generated, never typed."""
     return splice_generated(readme, README_BEGIN, README_END, markdown, source)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import os
+import re
 import sys
 from pathlib import Path
 
@@ -15,12 +17,76 @@ from lonlib.executors import EXECUTORS
 from lonlib.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
 from lonlib.validation import check_range
 
+# `lonlib --help`, plain text (no markup: the terminal shows it as it is written).
+DESCRIPTION = """\
+Local Optima Networks of DDPG on the coupled inverted pendulums task: sample them by basin
+hopping (run), follow and analyse them (status, lon, analyse, record, verify), calibrate the
+physics (calibrate). Run 'lonlib VERB --help' for a verb's options.
+
+Every verb takes --dry-run: check the arguments, the configuration, the executor and the
+folders, then stop before any compute or write.
+"""
+EPILOG = """\
+exit status: 0 done; 1 'lonlib verify' found a mismatch; 2 an error (a message on stderr
+starting 'lonlib: error:' or, for a malformed command line, 'lonlib <verb>: error:').
+Documentation: docs/ (make docs builds the site into site/)."""
+
+# A number such as -1e-4 is a value, not an option (argparse's own pattern misses exponents).
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser that reads ``-1e-4`` as a number (so ``--p -1e-4`` reaches the
+    configuration's own check, which refuses it by name), for the parser and its verbs."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
+
+
+def experiment_folder(text: str) -> Path:
+    """``text`` as a folder that exists: ValueError saying "no such folder" or "not a folder"
+    otherwise (whether it holds an experiment is the reader's check)."""
+    path = Path(text)
+    if not path.exists():
+        raise ValueError(f"{path}: no such folder")
+    if not path.is_dir():
+        raise ValueError(f"{path}: not a folder (it is a file); give an experiment's folder")
+    return path
+
+
+def _markdown_page(text: str | None) -> Path | None:
+    """The Markdown page of ``--docs`` (or ``None``): ValueError if it is missing."""
+    if text is None:
+        return None
+    page = Path(text)
+    if not page.is_file():
+        raise ValueError(f"--docs {page}: no such file")
+    return page
+
+
+def _check_output_folder(out: Path) -> str:
+    """What ``lonlib run`` checks of its output folder before computing, without creating or
+    writing anything: the parent exists, ``out`` is not a file and, if it exists, is
+    writable. Returns "new" or "exists"."""
+    if not out.parent.is_dir():
+        raise DataWriteError(
+            2,
+            f"cannot write {out}: its parent folder {out.parent} does not exist "
+            "(a typo, or a file system that is not mounted?); create it first",
+        )
+    if out.exists() and not out.is_dir():
+        raise DataWriteError(20, f"cannot write {out}: it is a file, not a folder")
+    if out.exists() and not os.access(out, os.W_OK | os.X_OK):
+        raise DataWriteError(13, f"cannot write {out}: permission denied")
+    return "exists" if out.exists() else "new"
+
 
 def _run(args: argparse.Namespace) -> None:
     from lonlib.experiment import load_config, run_experiment
 
     config = load_config(args.config)
-    changes = {}
+    changes: dict = {}
     if args.p:
         changes["perturbations"] = tuple(args.p)
     if args.runs is not None:
@@ -32,6 +98,9 @@ def _run(args: argparse.Namespace) -> None:
     out = Path(args.out) if args.out else Path("data") / config.name
     if args.checkpoint_minutes != 0:  # a write takes ~11 MB per slot: not every few steps
         check_range("checkpoint_minutes (0 for never)", args.checkpoint_minutes, 1.0, 1e7)
+    if args.dry_run:
+        _dry_run_experiment(config, out, args)
+        return
     trials = run_experiment(
         config,
         out,
@@ -45,9 +114,60 @@ def _run(args: argparse.Namespace) -> None:
     print(f"{len(trials)} local searches stored under {out}")
 
 
+def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
+    """``lonlib run --dry-run``: every check ``run_experiment`` makes before computing
+    (configuration, executor, slots, device, lockstep batch, output folder, a stored
+    experiment's configuration), nothing computed, created or written."""
+    from lonlib.ddpg import check_device
+    from lonlib.executors import resolve_executor, session_executor
+    from lonlib.lockstep import check_lockstep
+    from lonlib.manifest import manifest_path, updated_manifest
+
+    check_range("workers", args.workers, 1, 4096)
+    kind = resolve_executor(
+        session_executor(args.executor, config.executor, args.scheduler),
+        args.workers,
+        args.scheduler,
+    )
+    slots = config.slots if args.slots is None else args.slots
+    check_range("slots", slots, 1, 100_000)
+    check_device(config.ddpg.device)
+    if kind == "lockstep":
+        check_lockstep(config.ddpg, slots)
+    state = _check_output_folder(out)
+    if state == "exists" and manifest_path(out).exists():
+        updated_manifest(dataclasses.replace(config, executor=kind, slots=slots), out)
+        state = "resumes the experiment stored there"
+    elif state == "exists":
+        state = "an empty experiment folder"
+    else:
+        state = "created by the run"
+    where = f"{kind}, {args.workers} worker(s)"
+    if args.scheduler:
+        where += f" on {args.scheduler}"
+    if kind == "lockstep":
+        where += f", {slots} slots on {config.ddpg.device}"
+    print(
+        f"dry run: {config.name}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
+        f"{config.runs} runs per p; executor {where}; output {out} ({state}). "
+        "Nothing computed or written."
+    )
+
+
+def _dry_run_reader(verb: str, root: Path) -> None:
+    """``--dry-run`` of a verb that reads an experiment: the folder holds one."""
+    from lonlib.store import read_manifest
+
+    name = read_manifest(root).get("config", {}).get("name", "?")
+    print(f"dry run: lonlib {verb} would read the experiment {name!r} in {root}. Nothing done.")
+
+
 def _status(args: argparse.Namespace) -> None:
     from lonlib.experiment import run_status, status
 
+    root = experiment_folder(args.dir)
+    if args.dry_run:
+        return _dry_run_reader("status", root)
     print(status(args.dir).to_string(index=False))
     if args.runs:
         with pd.option_context("display.width", 250, "display.max_colwidth", 160):
@@ -58,12 +178,12 @@ def _lon(args: argparse.Namespace) -> None:
     from lonlib.lon import build_lon, cmlon
     from lonlib.lon_io import to_graphml, to_trace
     from lonlib.lon_metrics import metrics_table
-    from lonlib.store import read_experiment_trials
+    from lonlib.store import read_finished_trials
 
-    root = Path(args.dir)
-    trials = read_experiment_trials(root)
-    if trials.empty:
-        raise SystemExit(f"lonlib: no stored trials under {root}")
+    root = experiment_folder(args.dir)
+    if args.dry_run:
+        return _dry_run_reader("lon", root)
+    trials = read_finished_trials(root)
     table = metrics_table(trials, "max", args.tolerance)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
@@ -84,11 +204,12 @@ def _analyse(args: argparse.Namespace) -> None:
     from lonlib.claims_report import claims_markdown, splice_readme
     from lonlib.summary import splice_summary, summary_markdown
 
-    readme = Path(args.readme) if args.readme else None
-    if readme is not None:  # refuse a README without the markers before any work
-        if not readme.is_file():
-            raise ValueError(f"--readme {readme}: no such file")
+    root = experiment_folder(args.dir)
+    readme = _markdown_page(args.docs)
+    if readme is not None:  # refuse a page without the markers before any work
         splice_summary(splice_readme(readme.read_text(), "", args.dir), "", args.dir)
+    if args.dry_run:
+        return _dry_run_reader("analyse", root)
     result = analyse(
         args.dir, seed=args.seed, tolerance=args.tolerance, bins=args.bins, close_figures=True
     )
@@ -106,20 +227,28 @@ def _analyse(args: argparse.Namespace) -> None:
         text = splice_summary(text, summary_markdown(result.summary), args.dir)
         readme.write_text(text, encoding="utf-8")
         print(f"summary and claims tables pasted into {readme}")
+    return None
 
 
 def _record(args: argparse.Namespace) -> None:
     from lonlib.analysis import record_optima
 
+    root = experiment_folder(args.dir)
+    if args.dry_run:
+        return _dry_run_reader("record", root)
     paths = record_optima(args.dir, bins=args.bins, limit=args.limit)
     for path in paths:
         print(path)
     print(f"{len(paths)} recordings written under {args.dir}/recordings/")
+    return None
 
 
 def _verify(args: argparse.Namespace) -> None:
     from lonlib.verify import verify_experiment
 
+    root = experiment_folder(args.dir)
+    if args.dry_run:
+        return _dry_run_reader("verify", root)
     report = verify_experiment(args.dir, recordings=not args.no_recordings)
     shown = report.findings if args.all else report.findings[: args.limit]
     for finding in shown:
@@ -129,22 +258,32 @@ def _verify(args: argparse.Namespace) -> None:
     print(report.summary())
     if not report.ok:
         raise SystemExit(1)
+    return None
 
 
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import load_calibration, run_calibration, with_overrides
-    from lonlib.calibration_report import readme_markers
+    from lonlib.calibration_report import calibration_block, readme_markers
     from lonlib.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
-    readme = Path(args.readme) if args.readme else None
+    readme = _markdown_page(args.docs)
     begin, end = readme_markers(config.name)
-    if readme is not None:  # refuse a README without the markers before any work
+    if readme is not None:  # refuse a page without the markers before any work
         splice(readme.read_text(), begin, end, "")
+    if args.dry_run:
+        state = _check_output_folder(Path(args.out))
+        print(
+            f"dry run: calibration grid {config.name!r}: {len(config.cells)} cells x "
+            f"{config.seeds} seeds x {config.max_steps} env steps; output {args.out} ({state}). "
+            "Nothing computed or written."
+        )
+        return
     result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
     if readme is not None:
-        table = (Path(args.out) / "calibration.md").read_text()
-        body = f"*Generated from `{args.out}` by `lonlib calibrate`.*\n\n{table}"
+        body = calibration_block(
+            args.out, (Path(args.out) / "calibration.md").read_text(), config.name
+        )
         readme.write_text(splice(readme.read_text(), begin, end, body))
         print(f"calibration table pasted into {readme}")
     with pd.option_context("display.width", 200, "display.max_columns", 30):
@@ -155,8 +294,13 @@ def _calibrate(args: argparse.Namespace) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lonlib`` (also used for ``--help``)."""
-    parser = argparse.ArgumentParser(prog="lonlib", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(
+        prog="lonlib",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="VERB")
 
     run = sub.add_parser("run", help="run (or resume) an experiment")
     run.add_argument("config", help="'quick', 'reference', 'paper' or a YAML file")
@@ -207,8 +351,11 @@ def build_parser() -> argparse.ArgumentParser:
     analysis.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality")
     analysis.add_argument("--bins", type=int, default=50, help="histogram bins on [0, 1]")
     analysis.add_argument(
+        "--docs",
         "--readme",
-        help="also paste the summary and claims tables between their markers in this file",
+        metavar="PAGE",
+        help="also paste the summary and claims tables between their markers in this Markdown "
+        "page (docs/results.md; --readme is the former name)",
     )
     analysis.set_defaults(func=_analyse)
 
@@ -245,9 +392,20 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_argument("--batch", type=int, help="DDPG minibatch size (override)")
     calibrate.add_argument("--quiet", action="store_true", help="no progress bar")
     calibrate.add_argument(
-        "--readme", help="also paste the cell table between the calibration markers of this file"
+        "--docs",
+        "--readme",
+        metavar="PAGE",
+        help="also paste the cell table between the grid's calibration markers of this Markdown "
+        "page (docs/calibration.md; --readme is the former name)",
     )
     calibrate.set_defaults(func=_calibrate)
+    for verb in sub.choices.values():
+        verb.add_argument(
+            "--dry-run",
+            action="store_true",
+            help="check the arguments, configuration, executor and folders; compute and "
+            "write nothing",
+        )
     return parser
 
 

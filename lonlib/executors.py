@@ -26,6 +26,15 @@ Task = Callable[[float, int], Any]
 OnDone = Callable[[Any], None]
 
 
+def session_executor(requested: str | None, configured: str, scheduler: str | None) -> str:
+    """The executor a session asks for: ``requested`` (``--executor``) when given, else Dask
+    when a ``scheduler`` is given (a scheduler says where to run, so it outranks the
+    configuration's default executor), else the configuration's ``configured``."""
+    if requested:
+        return requested
+    return "dask" if scheduler else configured
+
+
 def resolve_executor(executor: str, workers: int, scheduler: str | None) -> str:
     """The executor that runs: ``"auto"`` is Dask with a scheduler, a pool for ``workers``
     > 1, else serial; an explicit choice must fit the other arguments (checked by name)."""

@@ -43,7 +43,7 @@ from lonlib.configs import (  # noqa: F401  (re-exported: configurations used to
 )
 from lonlib.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.ddpg import check_device
-from lonlib.executors import execute_runs, resolve_executor
+from lonlib.executors import execute_runs, resolve_executor, session_executor
 from lonlib.inflight import (
     Plan,
     checkpoint_lock_path,
@@ -247,7 +247,8 @@ def run_experiment(
 ) -> pd.DataFrame:
     """Run every unfinished run of ``config`` into ``out``; return all trials.
 
-    ``executor`` (default: the configuration's, ``"auto"``) picks where runs execute:
+    ``executor`` (default: Dask when a ``scheduler`` is given, else the configuration's)
+    picks where runs execute:
     ``"serial"`` in this process; ``"pool"``: ``workers`` local processes (one torch thread
     each); ``"dask"``: on ``scheduler``, a Dask scheduler address or ``"dask-local"`` for a
     LocalCluster of ``workers`` processes; ``"lockstep"``: the local searches of up to
@@ -268,7 +269,8 @@ def run_experiment(
     """
     check_range("workers", workers, 1, 4096)
     check_range("max_attempts", max_attempts, 1, 1000)
-    kind = resolve_executor(executor or config.executor, workers, scheduler)
+    requested = session_executor(executor, config.executor, scheduler)
+    kind = resolve_executor(requested, workers, scheduler)
     slots = config.slots if slots is None else slots
     check_range("slots", slots, 1, 100_000)
     if checkpoint_seconds is not None:

@@ -1,19 +1,33 @@
-"""The paper's figures (2-5), the 3-D LON (PNG and interactive HTML) and a sensitivity view.
+"""The paper's figures (2-5), the 3-D LON (PNG and interactive HTML), a sensitivity view and
+the calibration figure.
 
 Every function returns a figure (matplotlib, or plotly for the interactive LON) and leaves
-saving to the caller, except :func:`lon_3d_html` which writes a self-contained file
-(plotly.js embedded, opens offline in a browser).
+saving to the caller (:func:`save_png` / :func:`png_bytes` write byte-stable PNGs), except
+:func:`lon_3d_html` which writes a self-contained file (plotly.js embedded, opens offline in
+a browser). The statistical figures are drawn with seaborn under one theme (:func:`themed`);
+behaviour labels keep one colour each in every figure, and the marks that are not behaviours
+(the paper's peaks, detected peaks, a run's best) are drawn in black, which no label uses.
 """
 
 from __future__ import annotations
 
+import io
 import random
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import matplotlib.pyplot as plt
 import networkx as nx
 import numpy as np
 import pandas as pd
+import seaborn as sns
+from matplotlib import MatplotlibDeprecationWarning
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator
 
 from lonlib.behaviour import LABELS
 from lonlib.lon_io import to_igraph
@@ -21,6 +35,13 @@ from lonlib.peaks import PAPER_PEAKS, detect_peaks
 from lonlib.store import p_label
 
 GREY, RED = "#8a8a8a", "#d62728"
+# Marks that are not behaviours (the paper's peaks, detected peaks, a run's best): no label's.
+INK = "#000000"
+# The one theme of the statistical figures (seaborn's whitegrid at paper scale) and the PNG
+# settings that keep a figure's file byte-stable for the same data (no software version).
+THEME = {"style": "whitegrid", "context": "paper", "font_scale": 1.1}
+DPI = 120
+PNG_METADATA = {"Software": None}
 # One colour per behaviour label (lonlib.behaviour.LABELS order), colour-blind friendly.
 LABEL_COLOURS = dict(
     zip(
@@ -53,25 +74,97 @@ def label_colour(label: str) -> str:
     return LABEL_COLOURS.get(label, GREY)
 
 
+@contextmanager
+def themed() -> Iterator[None]:
+    """Draw inside this block with the figures' one theme (:data:`THEME`); matplotlib's
+    global settings are left as they were."""
+    with (
+        sns.axes_style(THEME["style"]),
+        sns.plotting_context(THEME["context"], font_scale=THEME["font_scale"]),
+    ):
+        yield
+
+
+@contextmanager
+def _fixed_jitter(seed: int = 0) -> Iterator[None]:
+    """seaborn draws strip-plot jitter from numpy's global generator: seed it for the block
+    (the same data give the same figure, byte for byte) and restore its state after."""
+    state = np.random.get_state()  # noqa: NPY002 (seaborn reads the legacy global state)
+    np.random.seed(seed)  # noqa: NPY002
+    try:
+        yield
+    finally:
+        np.random.set_state(state)  # noqa: NPY002
+
+
+def png_bytes(fig: plt.Figure) -> bytes:
+    """The figure as PNG bytes: fixed resolution, no software version in the metadata, so
+    the same data give the same bytes."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, dpi=DPI, format="png", metadata=PNG_METADATA)
+    return buffer.getvalue()
+
+
+def save_png(fig: plt.Figure, path: str | Path) -> Path:
+    """Write the figure as a byte-stable PNG (:func:`png_bytes`)."""
+    path = Path(path)
+    fig.savefig(path, dpi=DPI, format="png", metadata=PNG_METADATA)
+    return path
+
+
 def _labels(graph: nx.DiGraph) -> dict[str, str] | None:
     """Node -> behaviour label, or None when the graph's nodes carry no labels."""
     labels = {n: d.get("label") for n, d in graph.nodes(data=True)}
     return labels if any(labels.values()) else None
 
 
+def _count(optima: int, runs: int) -> str:
+    return f"{optima} optima, {runs} run{'s' if runs != 1 else ''}"
+
+
 def optima_boxplot(trials: pd.DataFrame) -> plt.Figure:
-    """Fig. 2: fitness of the accepted local optima, one box per perturbation strength."""
-    accepted = trials[trials["accepted"]]
+    """Fig. 2: fitness of the accepted local optima, one box per perturbation strength, every
+    optimum a point, each run's best marked (claim c compares them), n under each box."""
+    accepted = trials[trials["accepted"]].copy()
     ps = sorted(accepted["p"].unique(), reverse=True)
-    fig, ax = plt.subplots(figsize=(5, 4))
-    ax.boxplot(
-        [accepted.loc[accepted["p"] == p, "fitness"] for p in ps],
-        tick_labels=[p_label(p) for p in ps],
-    )
-    ax.set_xlabel("perturbation strength p")
-    ax.set_ylabel("local optimum fitness")
-    ax.set_title("Fitness of sampled local optima")
-    fig.tight_layout()
+    order = [p_label(p) for p in ps]
+    accepted["p_label"] = [p_label(p) for p in accepted["p"]]
+    bests = accepted.loc[accepted.groupby(["p", "run"])["fitness"].idxmax()]
+    with themed(), _fixed_jitter():
+        fig, ax = plt.subplots(figsize=(5.5, 4.2))
+        common = {"data": accepted, "x": "p_label", "y": "fitness", "order": order, "ax": ax}
+        with warnings.catch_warnings():  # seaborn 0.13 passes matplotlib 3.11 a deprecated `vert`
+            warnings.filterwarnings("ignore", "vert: bool", MatplotlibDeprecationWarning)
+            sns.boxplot(
+                **common, color="#e3e3e3", width=0.55, showfliers=False, linecolor="#4d4d4d"
+            )
+        sns.stripplot(**common, color=GREY, size=3.5, jitter=0.12, alpha=0.8)
+        sns.stripplot(
+            data=bests, x="p_label", y="fitness", order=order, ax=ax, jitter=False,
+            marker="D", size=6, color="white", edgecolor=INK, linewidth=1.2,
+        )  # fmt: skip
+        counts = {
+            p_label(p): (len(group), group["run"].nunique()) for p, group in accepted.groupby("p")
+        }
+        ax.set_xticks(
+            range(len(order)),
+            [f"{label}\nn = {_count(*counts[label])}" for label in order],
+        )
+        ax.set_xlabel("perturbation strength p")
+        ax.set_ylabel("local optimum fitness")
+        ax.set_title("Fitness of sampled local optima")
+        ax.legend(
+            handles=[
+                Line2D([], [], ls="", marker="o", color=GREY, label="accepted optimum"),
+                Line2D(
+                    [], [], ls="", marker="D", markerfacecolor="white", markeredgecolor=INK,
+                    label="a run's best",
+                ),
+            ],
+            fontsize=8,
+            loc="best",
+        )  # fmt: skip
+        fig.tight_layout()
     return fig
 
 
@@ -111,7 +204,8 @@ NODE_STYLE = {  # role -> (colour, matplotlib size, plotly size, legend label)
 def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figure:
     """Fig. 3: LON in 3-D, layout in the plane and z = fitness. Grey nodes, the best node
     red, start nodes small; an edge darkens towards the optimum it leads to. When the nodes
-    carry behaviour labels, the colour is the label's (the best node keeps its size)."""
+    carry behaviour labels, the colour is the label's (the best node keeps its size and is
+    outlined). The legend says all of this (:func:`lon_legend`)."""
     pos = layout_2d(graph, seed)
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
@@ -125,10 +219,10 @@ def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figu
     for role, names in _node_roles(graph).items():
         if not names:
             continue
-        color, size, _, legend = NODE_STYLE[role]
+        color, size, _, _ = NODE_STYLE[role]
         xyz = np.array([(*pos[n], graph.nodes[n]["fitness"]) for n in names])
         if labels is None:
-            ax.scatter(*xyz.T, c=color, s=size, depthshade=False, label=legend)
+            ax.scatter(*xyz.T, c=color, s=size, depthshade=False)
         else:
             colours = [label_colour(labels[n]) for n in names]
             ax.scatter(
@@ -139,15 +233,53 @@ def lon_3d(graph: nx.DiGraph, seed: int = 0, title: str = "3-D LON") -> plt.Figu
                 edgecolors="black",
                 linewidths=0.8 if "best" in role else 0.0,
             )
-    if labels is not None:
-        for name in ordered_labels(labels.values()):
-            ax.scatter([], [], [], c=label_colour(name), s=30, label=name)
     ax.set_zlabel("fitness")
     ax.set_xticks([])
     ax.set_yticks([])
     ax.set_title(title)
-    ax.legend(loc="upper left", fontsize=8)
+    ax.legend(handles=lon_legend(graph, labels), loc="upper left", fontsize=7)
     return fig
+
+
+def lon_legend(graph: nx.DiGraph, labels: dict[str, str] | None) -> list[Line2D]:
+    """Fig. 3's legend: the behaviour colours (when the nodes carry labels), then what the
+    best node, a start node and an edge's shading mean."""
+    dot = {"ls": "", "marker": "o"}
+    handles = []
+    if labels is not None:
+        handles += [
+            Line2D([], [], **dot, color=label_colour(name), markersize=6, label=name)
+            for name in ordered_labels(labels.values())
+        ]
+        best = Line2D(
+            [], [], **dot, markerfacecolor="white", markeredgecolor=INK, markersize=8,
+            label="best optimum (outlined, largest)",
+        )  # fmt: skip
+    else:
+        handles.append(Line2D([], [], **dot, color=GREY, markersize=6, label="local optimum"))
+        best = Line2D([], [], **dot, color=RED, markersize=8, label="best optimum (red)")
+    roles = {role for role, names in _node_roles(graph).items() if names}
+    if roles & {"best", "best start"}:
+        handles.append(best)
+    if roles & {"start", "best start"}:
+        handles.append(
+            Line2D(
+                [],
+                [],
+                **dot,
+                color=GREY,
+                markersize=3,
+                label="start node: a run's first optimum (small)",
+            )
+        )
+    if graph.number_of_edges():
+        handles.append(
+            Line2D(
+                [], [], color="#505050", lw=1.6,
+                label="accepted hop: light at its start, dark towards the optimum it reaches",
+            )
+        )  # fmt: skip
+    return handles
 
 
 def lon_3d_interactive(
@@ -264,41 +396,55 @@ def fitness_histogram(
     paper_peaks: tuple[float, ...] = PAPER_PEAKS,
     labels: np.ndarray | None = None,
 ) -> plt.Figure:
-    """Figs. 4 and 5: histogram of fitness values with detected peaks (triangles) and the
-    paper's peaks (dashed lines); with ``labels`` (one behaviour label per value) the bars
-    are stacked by label in the labels' colours."""
+    """Figs. 4 and 5: histogram of fitness values on [0, 1] (n in the title, integer counts)
+    with detected peaks (black triangles) and the paper's peaks (black dashed lines, each
+    labelled with its value); with ``labels`` (one behaviour label per value) the bars are
+    stacked by label in the labels' colours."""
     values = np.asarray(values, dtype=float)
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    if labels is None:
-        ax.hist(values, bins=bins, range=(0, 1), color=GREY, edgecolor="white")
-    else:
-        labels = np.asarray(labels, dtype=object)
-        present = ordered_labels(labels)
-        ax.hist(
-            [values[labels == name] for name in present],
-            bins=bins,
-            range=(0, 1),
-            stacked=True,
-            color=[label_colour(name) for name in present],
-            label=present,
-            edgecolor="white",
-        )
-    peaks = detect_peaks(values, bins=bins)
-    if len(peaks):
-        ax.plot(peaks["fitness"], peaks["count"] + 0.3, "v", color=RED, label="detected peak")
-    for i, peak in enumerate(paper_peaks):
-        ax.axvline(
-            peak,
-            color="#1f77b4",
-            linestyle="--",
-            linewidth=0.8,
-            label="paper's peaks" if i == 0 else None,
-        )
-    ax.set_xlabel("fitness")
-    ax.set_ylabel("count")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    with themed():
+        fig, ax = plt.subplots(figsize=(6.5, 3.8))
+        handles: list[Any] = []
+        if len(values):
+            if labels is None:
+                frame = pd.DataFrame({"fitness": values})
+                hue: dict[str, Any] = {"color": GREY}
+            else:
+                frame = pd.DataFrame(
+                    {"fitness": values, "label": np.asarray(labels, dtype=object).astype(str)}
+                )
+                present = ordered_labels(frame["label"])
+                hue = {
+                    "hue": "label",
+                    "hue_order": present,
+                    "palette": {name: label_colour(name) for name in present},
+                    "multiple": "stack",
+                }
+                handles += [Patch(color=label_colour(name), label=name) for name in present]
+            sns.histplot(
+                data=frame, x="fitness", bins=bins, binrange=(0, 1), stat="count",
+                edgecolor="white", linewidth=0.5, alpha=1.0, legend=False, ax=ax, **hue,
+            )  # fmt: skip
+        peaks = detect_peaks(values, bins=bins)
+        if len(peaks):
+            ax.plot(peaks["fitness"], peaks["count"] + 0.3, "v", color=INK, markersize=6)
+            handles.append(Line2D([], [], ls="", marker="v", color=INK, label="detected peak"))
+        for peak in paper_peaks:
+            ax.axvline(peak, color=INK, linestyle="--", linewidth=0.8)
+            ax.text(
+                peak, 1.0, f"{peak:g}", transform=ax.get_xaxis_transform(), ha="center",
+                va="bottom", fontsize=7, color=INK,
+            )  # fmt: skip
+        if paper_peaks:
+            handles.append(Line2D([], [], color=INK, ls="--", lw=0.8, label="paper's peaks"))
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, max(1.0, ax.get_ylim()[1]))
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_xlabel("fitness")
+        ax.set_ylabel("count")
+        ax.set_title(f"{title} (n = {len(values)})", pad=14)
+        if handles:
+            ax.legend(handles=handles, fontsize=7, loc="upper right")
+        fig.tight_layout()
     return fig
 
 
@@ -315,13 +461,15 @@ def sensitivity(
 ) -> plt.Figure:
     """LON metrics against the perturbation strength (log scale), one panel per metric."""
     table = metrics.sort_values("p")
-    fig, axes = plt.subplots(1, len(columns), figsize=(3 * len(columns), 3))
-    for ax, column in zip(np.atleast_1d(axes), columns, strict=True):
-        ax.plot(table["p"], table[column], "o-", color="#1f77b4")
-        ax.set_xscale("log")
-        ax.set_xlabel("perturbation strength p")
-        ax.set_title(column)
-    fig.tight_layout()
+    with themed():
+        fig, axes = plt.subplots(1, len(columns), figsize=(3 * len(columns), 3))
+        for ax, column in zip(np.atleast_1d(axes), columns, strict=True):
+            sns.lineplot(data=table, x="p", y=column, marker="o", color=INK, ax=ax)
+            ax.set_xscale("log")
+            ax.set_xlabel("perturbation strength p")
+            ax.set_ylabel("")
+            ax.set_title(column)
+        fig.tight_layout()
     return fig
 
 
@@ -331,14 +479,17 @@ def nominal_beside_robust(
     """Figs. 4-5 under both fitness estimates: the histogram of the nominal fitness (what
     the LON's nodes carry) and, beside it, of the same optima's robust mean (the fitness
     over the perturbed starts), on one fitness axis and one count axis."""
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.5), sharex=True, sharey=True)
-    for ax, values, name in zip(axes, (nominal, robust), ("nominal", "robust mean"), strict=True):
-        ax.hist(np.asarray(values, dtype=float), bins=bins, range=(0, 1), color=GREY)
-        ax.set_xlabel(f"fitness ({name})")
-        ax.set_title(f"{title}: {name} (n = {len(values)})", fontsize=9)
-        ax.yaxis.get_major_locator().set_params(integer=True)
-    axes[0].set_ylabel("count")
-    fig.tight_layout()
+    with themed():
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.5), sharex=True, sharey=True)
+        for ax, values, name in zip(
+            axes, (nominal, robust), ("nominal", "robust mean"), strict=True
+        ):
+            ax.hist(np.asarray(values, dtype=float), bins=bins, range=(0, 1), color=GREY)
+            ax.set_xlabel(f"fitness ({name})")
+            ax.set_title(f"{title}: {name} (n = {len(values)})", fontsize=9)
+            ax.yaxis.get_major_locator().set_params(integer=True)
+        axes[0].set_ylabel("count")
+        fig.tight_layout()
     return fig
 
 
@@ -346,21 +497,22 @@ def retention_plot(curve: pd.DataFrame) -> plt.Figure:
     """The retention curve: per start-noise level, the share of optima keeping at least
     half their nominal fitness, one line per p (``curve`` has ``p``, ``noise``,
     ``keep_share``)."""
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    for p, group in curve.groupby("p", sort=True):
-        ax.plot(
-            group["noise"],
-            group["keep_share"],
-            "o-",
-            label=f"p = {p:g} (n = {group['optima'].iloc[0]})",
-        )
-    ax.set_xscale("log")
-    ax.set_ylim(0, 1.02)
-    ax.set_xlabel("start noise (half-width of U[-noise, noise] on x, x_dot, phi, phi_dot)")
-    ax.set_ylabel("share keeping >= 1/2 fitness")
-    ax.set_title("Conditioning of the LON's nodes")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    with themed():
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        for p, group in curve.groupby("p", sort=True):
+            ax.plot(
+                group["noise"],
+                group["keep_share"],
+                "o-",
+                label=f"p = {p:g} (n = {group['optima'].iloc[0]})",
+            )
+        ax.set_xscale("log")
+        ax.set_ylim(0, 1.02)
+        ax.set_xlabel("start noise (half-width of U[-noise, noise] on x, x_dot, phi, phi_dot)")
+        ax.set_ylabel("share keeping >= 1/2 fitness")
+        ax.set_title("Conditioning of the LON's nodes")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
     return fig
 
 
@@ -372,20 +524,73 @@ def claim_d_curve_plot(
     ``p``, ``epsilon``, ``share``, ``nodes``; with ``ci_low``/``ci_high`` a band), the
     pre-registered ``epsilon`` as a vertical line and the largest share "sparse" allows
     (``max_share``) as a horizontal one."""
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    for p, group in curve.groupby("p", sort=True):
-        (line,) = ax.plot(group["epsilon"], group["share"], "o-", label=f"p = {p_label(p)}")
-        if {"ci_low", "ci_high"} <= set(group.columns):
-            ax.fill_between(
-                group["epsilon"], group["ci_low"], group["ci_high"], color=line.get_color(),
-                alpha=0.15, linewidth=0,
+    with themed():
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        for p, group in curve.groupby("p", sort=True):
+            (line,) = ax.plot(group["epsilon"], group["share"], "o-", label=f"p = {p_label(p)}")
+            if {"ci_low", "ci_high"} <= set(group.columns):
+                ax.fill_between(
+                    group["epsilon"], group["ci_low"], group["ci_high"], color=line.get_color(),
+                    alpha=0.15, linewidth=0,
+                )  # fmt: skip
+        ax.axvline(epsilon, color=GREY, linestyle="--", linewidth=1, label=f"epsilon = {epsilon:g}")
+        ax.axhline(
+            max_share, color=RED, linestyle=":", linewidth=1, label=f"sparse: <= {max_share:g}"
+        )
+        ax.set_ylim(0, 1.02)
+        ax.set_xlabel("epsilon (standard deviations, standardised behaviour features)")
+        ax.set_ylabel("share of multi-inward nodes")
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+    return fig
+
+
+def calibration_figure(records: list[dict[str, Any]], searches: pd.DataFrame) -> plt.Figure:
+    """The calibration study's figure. Left: best greedy fitness of every search per cell
+    (a point per search, the share of searches that left zero beside). Right: the best
+    greedy fitness so far against env steps, one line per search, one colour per cell."""
+    names = [record["name"] for record in records]
+    palette = dict(zip(names, sns.color_palette("tab20", max(len(names), 2)), strict=False))
+    curves = pd.DataFrame(
+        [
+            {"cell": record["name"], "search": i, "env steps": step, "best so far": best}
+            for record in records
+            for i, search in enumerate(record["searches"])
+            for step, best in zip(
+                np.asarray(search["history_env_steps"], dtype=float),
+                np.fmax.accumulate(np.asarray(search["history_greedy_fitness"], dtype=float)),
+                strict=True,
+            )
+        ],
+        columns=["cell", "search", "env steps", "best so far"],
+    )
+    with themed():
+        fig, (left, right) = plt.subplots(
+            1, 2, figsize=(13, max(3.5, 1.5 + 0.4 * len(names))),
+            gridspec_kw={"width_ratios": [1, 1]},
+        )  # fmt: skip
+        points = searches[searches["cell"].isin(names)]
+        sns.stripplot(
+            data=points, x="best_fitness", y="cell", order=names, hue="cell", hue_order=names,
+            palette=palette, jitter=False, dodge=False, size=5, legend=False, ax=left,
+        )  # fmt: skip
+        for row, name in enumerate(names):
+            share = (points.loc[points["cell"] == name, "best_fitness"] > 0).mean()
+            left.annotate(f"{share:.0%} left 0", (1.0, row), fontsize=7, va="center", ha="right")
+        left.set_xlim(-0.02, 1.02)
+        left.set_xlabel("best greedy fitness per search")
+        left.set_ylabel("")
+        if len(curves):
+            sns.lineplot(
+                data=curves, x="env steps", y="best so far", hue="cell", hue_order=names,
+                units="search", estimator=None, palette=palette, drawstyle="steps-post",
+                linewidth=1, ax=right,
             )  # fmt: skip
-    ax.axvline(epsilon, color=GREY, linestyle="--", linewidth=1, label=f"epsilon = {epsilon:g}")
-    ax.axhline(max_share, color=RED, linestyle=":", linewidth=1, label=f"sparse: <= {max_share:g}")
-    ax.set_ylim(0, 1.02)
-    ax.set_xlabel("epsilon (standard deviations, standardised behaviour features)")
-    ax.set_ylabel("share of multi-inward nodes")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+            right.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False)
+        right.set_xlabel("environment steps")
+        right.xaxis.set_major_formatter(plt.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
+        right.set_ylabel("best greedy fitness so far")
+        fig.suptitle("Calibration: which physics lets DDPG leave zero")
+        fig.tight_layout()
     return fig

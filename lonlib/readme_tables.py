@@ -1,5 +1,6 @@
 """Generated tables in Markdown files: the text between a pair of marker comments is
-replaced by a generated table, so that README tables are never typed by hand."""
+replaced by a generated table, so that the tables of the docs pages are never typed by
+hand."""
 
 from __future__ import annotations
 

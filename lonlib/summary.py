@@ -1,6 +1,6 @@
 """How far an experiment is and what it found so far, per perturbation strength: the table
-``analyse`` writes as ``figures/summary.csv`` and ``lonlib analyse --readme`` pastes into
-the README, so that the reference experiment's state is generated, never typed."""
+``analyse`` writes as ``figures/summary.csv`` and ``lonlib analyse --docs`` pastes into
+docs/results.md, so that the reference experiment's state is generated, never typed."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from lonlib.experiment import run_status
 from lonlib.readme_tables import splice_generated
 from lonlib.store import p_label, read_finished_trials
 
-README_BEGIN = "<!-- summary:begin (lonlib analyse data/reference --readme README.md) -->"
+README_BEGIN = "<!-- summary:begin (lonlib analyse data/reference --docs docs/results.md) -->"
 README_END = "<!-- summary:end -->"
 
 

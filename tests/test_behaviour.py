@@ -42,7 +42,7 @@ def test_never_pushing_from_a_hang_is_swinging_low():
 
 
 def test_explicit_eulers_energy_pumping_spins_an_unpushed_rod():
-    # The integrator artefact of the README: from 0.1 rad of start noise, a never-pushing
+    # The integrator artefact of docs/model.md: from 0.1 rad of start noise, a never-pushing
     # policy's rod swings over the top after ~1400 steps and then spins.
     config = PendulumConfig(n_carts=1, initial_noise=0.1, integrator="euler", steps=3000)
     d = describe(zero_controller(config), config, Scoring(eval_seed=0))

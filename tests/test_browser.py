@@ -10,7 +10,7 @@ asset error, ``data/`` in the file browser. The server is stopped by its process
 
 Needs Chromium and chromedriver (Debian: ``apt-get install chromium chromium-driver``),
 selenium (dev extra), JupyterLab and rerun-notebook (lab extra); skipped otherwise.
-``LONLIB_SCREENSHOTS=docs`` also saves small screenshots there (the README shows them).
+``LONLIB_SCREENSHOTS=docs`` also saves small screenshots there (docs/reproducing.md shows them).
 WebGL (the rerun viewer, plotly's 3-D) is drawn by SwiftShader, Chromium's CPU renderer.
 """
 

@@ -385,8 +385,11 @@ def test_readme_gets_the_grids_table_between_its_own_markers(tiny_study, tmp_pat
         readme.read_text()
         + "<!-- calibration-tiny:begin -->\nold\n<!-- calibration-tiny:end -->\noutro\n"
     )
-    cli_main(["calibrate", "--grid", "tiny", "--quiet", "--readme", str(readme), str(out)])
+    cli_main(["calibrate", "--grid", "tiny", "--quiet", "--docs", str(readme), str(out)])
     text = readme.read_text()
     assert "not ours" in text and "old" not in text  # only the tiny grid's table changed
-    assert (out / "calibration.md").read_text().strip() in text
+    table = (out / "calibration.md").read_text()
+    cells, drift = table.split("| integrator | steps |")
+    assert cells.strip() in text
+    assert "| integrator | steps |" not in text  # the drift table: the default grid's block only
     assert text.endswith("<!-- calibration-tiny:end -->\noutro\n")

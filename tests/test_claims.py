@@ -426,7 +426,7 @@ def test_the_analysis_only_command_refuses_a_folder_without_an_experiment(tmp_pa
     with pytest.raises(SystemExit) as exit_info:
         main(["analyse", str(missing)])
     assert exit_info.value.code == 2
-    assert f"no experiment in {missing}" in capsys.readouterr().err
+    assert f"{missing}: no such folder" in capsys.readouterr().err
     assert not missing.exists()
     empty = write_experiment(tmp_path / "empty", {})
     with pytest.raises(SystemExit):

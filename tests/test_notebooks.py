@@ -133,5 +133,5 @@ def test_a_missing_experiment_says_so_and_what_to_run(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["status", str(folder)])
     error = capsys.readouterr().err
-    assert "no experiment" in error and "corrupt" not in error.lower()
+    assert "no such folder" in error and "corrupt" not in error.lower()
     assert not folder.exists()  # nothing created while looking

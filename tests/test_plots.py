@@ -23,12 +23,33 @@ from tests.test_lon import HAND, trials  # noqa: E402
 
 def test_boxplot_has_one_box_per_p_and_labels():
     sample = trials([(0, 0, -1, 0.3, True), (0, 1, 0, 0.4, True)], p=1e-3)
-    fig = optima_boxplot(__import__("pandas").concat([HAND, sample]))
+    table = __import__("pandas").concat([HAND, sample])
+    fig = optima_boxplot(table)
     ax = fig.axes[0]
     assert ax.get_xlabel() == "perturbation strength p"
     assert ax.get_ylabel() == "local optimum fitness"
-    assert [t.get_text() for t in ax.get_xticklabels()] == ["0.001", "0.0001"]
-    assert len([line for line in ax.lines if line.get_label() == "_nolegend_"]) >= 2 * 6
+    ticks = [t.get_text() for t in ax.get_xticklabels()]
+    accepted = table[table["accepted"]]
+    optima, runs = len(accepted[accepted["p"] == 1e-4]), accepted[accepted["p"] == 1e-4]["run"]
+    assert ticks[0] == "0.001\nn = 2 optima, 1 run"
+    assert ticks[1] == f"0.0001\nn = {optima} optima, {runs.nunique()} runs"
+    # every accepted optimum a point, and each run's best marked once more
+    points = sum(len(c.get_offsets()) for c in ax.collections)
+    assert points == len(accepted) + accepted.groupby(["p", "run"]).ngroups
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert legend == ["accepted optimum", "a run's best"]
+
+
+def test_figures_are_byte_stable_for_the_same_data():
+    from lonlib.plots import png_bytes
+
+    table = __import__("pandas").concat(
+        [HAND, trials([(0, 0, -1, 0.3, True), (0, 1, 0, 0.4, True)], p=1e-3)]
+    )
+    assert png_bytes(optima_boxplot(table)) == png_bytes(optima_boxplot(table))
+    values = np.linspace(0.1, 0.9, 40)
+    assert png_bytes(fitness_histogram(values, "t")) == png_bytes(fitness_histogram(values, "t"))
+    assert b"Matplotlib" not in png_bytes(fitness_histogram(values, "t"))  # no version inside
 
 
 def test_lon_3d_draws_every_node_with_fitness_as_height(tmp_path):
@@ -40,11 +61,17 @@ def test_lon_3d_draws_every_node_with_fitness_as_height(tmp_path):
     assert len(heights) == graph.number_of_nodes()
     assert sorted(heights) == sorted(f for _, f in graph.nodes(data="fitness"))
     assert ax.get_zlabel() == "fitness"
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(text.startswith("best optimum") for text in legend)
+    assert any(text.startswith("start node") for text in legend)
+    assert any("dark towards the optimum" in text for text in legend)
     html = lon_3d_html(graph, tmp_path / "lon.html").read_text()
     assert "plotly" in html and len(html) > 100_000  # plotly.js embedded: works offline
 
 
 def test_histograms_mark_detected_and_paper_peaks():
+    from lonlib.plots import INK, LABEL_COLOURS
+
     rng = np.random.default_rng(0)
     values = np.concatenate([rng.normal(peak, 0.01, 100) for peak in PAPER_PEAKS])
     peaks = detect_peaks(values)
@@ -54,7 +81,16 @@ def test_histograms_mark_detected_and_paper_peaks():
     fig = fitness_histogram(values, "sinks")
     ax = fig.axes[0]
     assert ax.get_xlabel() == "fitness" and ax.get_ylabel() == "count"
-    assert len([line for line in ax.lines if line.get_linestyle() == "--"]) == 5
+    assert ax.get_title() == "sinks (n = 500)"
+    dashed = [line for line in ax.lines if line.get_linestyle() == "--"]
+    assert len(dashed) == 5
+    # the paper's peaks are labelled with their values, in a colour no behaviour uses
+    assert [t.get_text() for t in ax.texts] == [f"{p:g}" for p in PAPER_PEAKS]
+    assert INK not in LABEL_COLOURS.values()
+    assert all(line.get_color() == INK for line in dashed)
+    # the count axis has integer ticks only, also with a handful of values
+    few = fitness_histogram(np.array([0.2, 0.21, 0.5]), "few").axes[0]
+    assert all(float(t).is_integer() for t in few.get_yticks())
 
 
 def test_peaks_at_the_edges_and_empty_input():

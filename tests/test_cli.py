@@ -1,0 +1,133 @@
+"""The ``lonlib`` command line as a user meets it: plain-text help, negative numbers, missing
+folders and files said as such, one error style and exit status across verbs, a scheduler
+that chooses the Dask executor, and ``--dry-run``."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import pytest
+
+from lonlib.cli import build_parser, main
+from lonlib.experiment import load_config, run_experiment
+from lonlib.store import DataWriteError
+
+READERS = ["status", "lon", "analyse", "record", "verify"]
+# What reStructuredText or Sphinx markup looks like in a help text.
+MARKUP = re.compile(r"``|:(func|class|mod|data|meth):`")
+
+
+def _fails(argv: list[str], capsys) -> str:
+    """Run ``lonlib argv``; it must exit 2. Returns what it wrote on stderr."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    return capsys.readouterr().err
+
+
+def _help(argv: list[str], capsys) -> str:
+    with pytest.raises(SystemExit) as stop:
+        main([*argv, "--help"])
+    assert stop.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_the_help_is_plain_text(capsys):
+    texts = [_help([], capsys)] + [
+        _help([verb], capsys) for verb in build_parser()._actions[-1].choices
+    ]
+    for text in texts:
+        assert not MARKUP.search(text), text
+    assert "exit status" in texts[0] and "--dry-run" in texts[0]
+
+
+def test_a_negative_number_is_read_as_a_value_and_refused_by_name(capsys):
+    error = _fails(["run", "quick", "--p", "-1e-4", "--dry-run"], capsys)
+    assert "expected at least one argument" not in error
+    assert error.startswith("lonlib: error: perturbations must be in (0, 10], got -0.0001")
+    error = _fails(["run", "quick", "--p", "1e-4", "-.5", "--dry-run"], capsys)
+    assert "got -0.5" in error
+
+
+@pytest.mark.parametrize("verb", READERS)
+def test_a_missing_folder_or_a_file_is_said_to_be_one(verb, tmp_path, capsys):
+    missing = tmp_path / "data" / "nothing"
+    error = _fails([verb, str(missing)], capsys)
+    assert error == f"lonlib: error: {missing}: no such folder\n"
+    a_file = tmp_path / "trials.csv"
+    a_file.write_text("p,run\n")
+    error = _fails([verb, str(a_file)], capsys)
+    assert error.startswith(f"lonlib: error: {a_file}: not a folder")
+    assert "--out" not in error and "no experiment" not in error
+    assert not missing.exists()
+
+
+@pytest.mark.parametrize("verb", READERS)
+def test_every_verb_refuses_an_empty_folder_in_one_style(verb, tmp_path, capsys):
+    error = _fails([verb, str(tmp_path)], capsys)
+    assert error.startswith(f"lonlib: error: no experiment in {tmp_path} yet")
+    assert list(tmp_path.iterdir()) == []  # nothing created while looking
+
+
+def test_a_scheduler_chooses_the_dask_executor_over_the_configurations(tmp_path, capsys):
+    from lonlib.executors import session_executor
+
+    assert load_config("quick").executor == "lockstep"
+    assert session_executor(None, "lockstep", "dask-local") == "dask"
+    assert session_executor(None, "lockstep", None) == "lockstep"
+    assert session_executor("pool", "lockstep", None) == "pool"
+    out = tmp_path / "quick"
+    main(
+        [
+            "run",
+            "quick",
+            "--scheduler",
+            "dask-local",
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+            "--dry-run",
+        ]
+    )
+    printed = capsys.readouterr().out
+    assert "executor dask, 2 worker(s) on dask-local" in printed
+    assert not out.exists()
+    # run_experiment itself gets past the executor to its next check (the folder) at once
+    config = dataclasses.replace(load_config("quick"), runs=1)
+    with pytest.raises(DataWriteError, match="does not exist"):
+        run_experiment(config, tmp_path / "no" / "such", scheduler="dask-local", progress=False)
+    # an executor named on the command line still has to fit the scheduler
+    error = _fails(
+        ["run", "quick", "--executor", "lockstep", "--scheduler", "dask-local", "--dry-run"], capsys
+    )
+    assert "does not use one" in error
+
+
+def test_a_dry_run_checks_everything_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "exp"
+    main(["run", "quick", "--out", str(out), "--dry-run"])
+    assert "Nothing computed or written" in capsys.readouterr().out
+    assert not out.exists()
+    for argv, message in [
+        (["run", "quick", "--out", str(tmp_path / "a" / "b")], "does not exist"),
+        (["run", "quick", "--executor", "dask"], "needs a scheduler"),
+        (["run", "quick", "--slots", "0"], "slots must be"),
+        (["run", "quick", "--device", "tpu"], "is not a torch device"),
+        (["run", "no-such-config"], "no-such-config"),
+        (["analyse", "data/reference", "--docs", str(tmp_path / "none.md")], "no such file"),
+        (["calibrate", str(tmp_path / "a" / "b")], "does not exist"),
+    ]:
+        assert message in _fails([*argv, "--dry-run"], capsys)
+    a_file = tmp_path / "file"
+    a_file.write_text("")
+    assert "a file, not a folder" in _fails(
+        ["run", "quick", "--out", str(a_file), "--dry-run"], capsys
+    )
+    # a folder holding another experiment is refused, as the real run refuses it
+    reference = Path(__file__).parents[1] / "data" / "reference"
+    assert "different configuration" in _fails(
+        ["run", "quick", "--out", str(reference), "--dry-run"], capsys
+    )

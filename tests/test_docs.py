@@ -1,0 +1,256 @@
+"""The README and the documentation site: the README fits a screen, the site builds offline
+with ``--strict`` (broken links fail), the generated tables equal what the code generates
+from the committed data, and every ``lonlib`` and ``make`` command the README and the docs
+show is checked (a dry run, or for real where it is cheap and reads only)."""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import torch
+import yaml
+
+import lonlib.ddpg
+from lonlib.calibration_report import DRIFT_HEADER, README_BEGIN, README_END
+from lonlib.claims import peaks_beside_paper
+from lonlib.claims_report import README_BEGIN as CLAIMS_BEGIN
+from lonlib.claims_report import README_END as CLAIMS_END
+from lonlib.claims_report import claims_markdown, splice_readme
+from lonlib.cli import build_parser, main
+from lonlib.readme_tables import splice_generated
+from lonlib.store import read_experiment_trials
+from lonlib.summary import README_BEGIN as SUMMARY_BEGIN
+from lonlib.summary import splice_summary, summary_markdown
+
+ROOT = Path(__file__).parents[1]
+README = ROOT / "README.md"
+PAGES = sorted((ROOT / "docs").rglob("*.md"))
+REFERENCE = ROOT / "data" / "reference"
+MKDOCS = Path(sys.executable).with_name("mkdocs")
+
+
+def test_the_readme_fits_a_screen_and_its_first_screen_holds_the_essentials():
+    lines = README.read_text().splitlines()
+    assert len(lines) <= 250
+    first = "\n".join(lines[:150])
+    for needed in [
+        "![3-D LON of the reference experiment",  # the reference LON figure
+        "make reproduce",
+        "make test",
+        "```python",
+        "## The result",
+        "## Concepts and code",
+        "lonlib.task",
+        "@inproceedings{zhou2024lonrl",
+        "LICENSE",
+        "data/reference-v2/",
+    ]:
+        assert needed in first, needed
+    assert (ROOT / "LICENSE").read_text().startswith("MIT License")
+    assert "<!--" not in README.read_text()  # generated tables live in docs/, not here
+
+
+def test_the_readme_python_example_runs(monkeypatch, capsys):
+    block = re.search(r"```python\n(.*?)```", README.read_text(), re.S).group(1)
+    monkeypatch.chdir(ROOT)
+    exec(compile(block, "README.md", "exec"), {})
+    printed = capsys.readouterr().out
+    assert "[0.9405]" in printed and "funnels" in printed
+
+
+@pytest.mark.skipif(not MKDOCS.exists(), reason="mkdocs is not installed (the docs extra)")
+def test_the_site_builds_offline_and_strict(tmp_path):
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
+    build = subprocess.run(
+        [str(MKDOCS), "build", "--strict", "--site-dir", str(tmp_path / "site")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert build.returncode == 0, build.stderr[-3000:]
+    site = tmp_path / "site"
+    assert (site / "api" / "ddpg" / "index.html").read_text().count("doc-heading") > 10
+    assert (site / "reference-figures" / "fig3_lon_p=0.0001.png").exists()
+    for page in site.rglob("*.html"):  # nothing is fetched from elsewhere when a page opens
+        assert "fonts.googleapis" not in page.read_text(), page
+
+
+def _block(text: str, begin: str, end: str) -> str:
+    assert text.count(begin) == 1 and text.count(end) == 1, begin
+    return text.split(begin)[1].split(end)[0]
+
+
+def test_the_generated_tables_equal_what_the_code_generates_from_the_committed_data():
+    page = (ROOT / "docs" / "results.md").read_text()
+    figures = REFERENCE / "figures"
+    summary = summary_markdown(pd.read_csv(figures / "summary.csv"))
+    assert splice_summary(page, summary, "data/reference") == page
+    claims = claims_markdown(
+        pd.read_csv(figures / "claims.csv"),
+        peaks_beside_paper(read_experiment_trials(REFERENCE)),
+        pd.read_csv(figures / "power.csv"),
+        pd.read_csv(figures / "claim_d_curve.csv"),
+    )
+    assert splice_readme(page, claims, "data/reference") == page
+    assert splice_generated(page, CLAIMS_BEGIN, CLAIMS_END, claims, "data/reference") == page
+
+
+def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printed_once():
+    text = {page: page.read_text() for page in PAGES}
+    markers = [
+        (SUMMARY_BEGIN, "<!-- summary:end -->"),
+        (CLAIMS_BEGIN, CLAIMS_END),
+        (README_BEGIN, README_END),
+        ("<!-- calibration-one-cart:begin -->", "<!-- calibration-one-cart:end -->"),
+        ("<!-- calibration-batch2000:begin -->", "<!-- calibration-batch2000:end -->"),
+        ("<!-- ddpg-speed:begin (python -m benchmarks.readme) -->", "<!-- ddpg-speed:end -->"),
+        (
+            "<!-- lockstep-speed:begin (python -m benchmarks.readme) -->",
+            "<!-- lockstep-speed:end -->",
+        ),
+    ]
+    for begin, end in markers:
+        holders = [page for page, body in text.items() if begin in body]
+        assert len(holders) == 1, begin
+        _block(text[holders[0]], begin, end)
+    everything = "\n".join(text.values())
+    assert everything.count(DRIFT_HEADER) == 1  # the integrator drift table, once
+
+
+# --- every command the README and the docs show ---------------------------------------
+
+# Inline spans that name a command's output or a pattern, not a command to run.
+NOT_COMMANDS = {"lonlib verify: OK", "lonlib VERB --help"}
+READERS = {"status", "lon", "analyse", "record", "verify"}
+
+
+def documented_commands() -> list[tuple[str, str]]:
+    """(file, command) for every ``lonlib ...`` and ``make ...`` line of a ```bash block and
+    every inline code span starting with one, in README.md and docs/."""
+    found = []
+    for path in [README, *PAGES]:
+        text = path.read_text()
+        name = str(path.relative_to(ROOT))
+        for block in re.findall(r"```bash\n(.*?)```", text, re.S):
+            for line in block.splitlines():
+                line = line.split("#")[0].strip()
+                if line.startswith(("lonlib ", "make ")):
+                    found.append((name, line))
+        for span in re.findall(r"`((?:lonlib|make) [^`]+)`", text):
+            span = " ".join(span.split())
+            if span not in NOT_COMMANDS:
+                found.append((name, span))
+    return sorted(set(found))
+
+
+COMMANDS = documented_commands()
+
+
+def test_the_docs_show_commands():
+    assert len(COMMANDS) > 30
+    assert (
+        "docs/experiments.md",
+        "lonlib run quick --scheduler dask-local --workers 2",
+    ) in COMMANDS
+
+
+@pytest.fixture
+def project(tmp_path, monkeypatch):
+    """A project folder for one command: the repository's data folders, configurations and
+    notebooks linked in, the docs' own YAML example as ``my.yaml``, a grid ``best.yaml``."""
+    (tmp_path / "data").mkdir()
+    for folder in (ROOT / "data").iterdir():
+        if folder.is_dir():
+            (tmp_path / "data" / folder.name).symlink_to(folder)
+    for name in ("configs", "notebooks", "docs"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    example = re.search(r"```yaml\n(.*?)```", (ROOT / "docs/experiments.md").read_text(), re.S)
+    (tmp_path / "my.yaml").write_text(example.group(1))
+    (tmp_path / "best.yaml").write_text(
+        yaml.safe_dump(
+            {"base": "default", "name": "best", "cells": [{"motor": "velocity", "motor_tau": 0.02}]}
+        )
+    )
+    monkeypatch.chdir(tmp_path)
+
+    def parse_only(device: str) -> None:  # a documented GPU command, checked on a CPU machine
+        torch.device(device)
+
+    monkeypatch.setattr(lonlib.ddpg, "check_device", parse_only)
+    return tmp_path
+
+
+def _lonlib(argv: list[str], project: Path, capsys) -> str:
+    """Check one documented ``lonlib`` command: cheap read-only ones for real, the others as
+    a dry run. A folder a reading verb names and the repository lacks (``data/paper``) is
+    stood in for by the reference experiment."""
+    argv = [arg for arg in argv if arg not in "[]"]
+    argv = [arg.strip("[]") for arg in argv]
+    verb = argv[0]
+    if verb in READERS and len(argv) > 1 and not Path(argv[1]).exists():
+        Path(argv[1]).symlink_to(REFERENCE)
+    real = verb == "status"
+    try:
+        main(argv if real else [*argv, "--dry-run"])
+    except SystemExit as stop:
+        pytest.fail(f"lonlib {shlex.join(argv)} exited {stop.code}: {capsys.readouterr().err}")
+    return capsys.readouterr().out
+
+
+MAKE_TO_LONLIB = {"CONFIG": None, "WORKERS": "--workers", "SCHEDULER": "--scheduler"}
+
+
+@pytest.mark.parametrize(("source", "command"), COMMANDS, ids=[c for _, c in COMMANDS])
+def test_a_documented_command_works(source, command, project, capsys):
+    words = shlex.split(command)
+    if words[0] == "lonlib":
+        verbs = build_parser()._actions[-1].choices
+        if len(words) == 2 and words[1] in verbs:
+            return  # a verb named in the text: it exists
+        if words[1:] == ["--help"]:
+            with pytest.raises(SystemExit) as stop:
+                main(["--help"])
+            assert stop.value.code == 0
+            return
+        out = _lonlib(words[1:], project, capsys)
+        assert out, command
+        return
+    # make: the target exists and its recipe expands (make -n runs nothing) ...
+    dry = subprocess.run(
+        ["make", "-n", *words[1:]], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert dry.returncode == 0, f"{command}: {dry.stderr}"
+    settings = dict(word.split("=", 1) for word in words[1:] if "=" in word)
+    targets = [word for word in words[1:] if "=" not in word]
+    rules = re.findall(r"^([\w-]+):", (ROOT / "Makefile").read_text(), re.M)
+    assert set(targets) <= set(rules), command  # a rule of the Makefile, not a folder's name
+    # ... and what it would sample or analyse is checked as the lonlib command it runs
+    if "reproduce" in targets or not targets:
+        config = settings.get("CONFIG", "quick")
+        name = (
+            yaml.safe_load(Path(config).read_text())["name"] if config.endswith(".yaml") else config
+        )
+        argv = ["run", config, "--workers", settings.get("WORKERS", "2")]
+        argv += ["--out", settings.get("OUT", f"data/{name}")]
+        for key, option in [
+            ("SCHEDULER", "--scheduler"),
+            ("EXECUTOR", "--executor"),
+            ("SLOTS", "--slots"),
+            ("DEVICE", "--device"),
+        ]:
+            if settings.get(key):
+                argv += [option, settings[key]]
+        assert "Nothing computed" in _lonlib(argv, project, capsys)
+    if "figures" in targets:
+        assert "would read" in _lonlib(
+            ["analyse", settings.get("EXPERIMENT", "data/reference")], project, capsys
+        )
