@@ -186,7 +186,7 @@ reproduce: setup
 	echo "  recordings/   rerun .rrd files: view with  $(BIN)/rerun $(OUT)/recordings/<file>.rrd"; \
 	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
 
-# Analysis only: figures, tables and the claims table from stored runs (lonlib.analysis, the
+# Analysis only: figures, tables and the claims table from stored runs (lonlib.analysis.pipeline, the
 # code the analyse_lon notebook runs); refuses a folder without an experiment.
 figures: setup
 	$(BIN)/lonlib analyse $(EXPERIMENT)

@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.executors import EXECUTORS
-from lonlib.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
-from lonlib.validation import check_range
+from lonlib.experiment.executors import EXECUTORS
+from lonlib.storage.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
+from lonlib.util.validation import check_range
 
 
 def _run(args: argparse.Namespace) -> None:
-    from lonlib.experiment import load_config, run_experiment
+    from lonlib.experiment.running import load_config, run_experiment
 
     config = load_config(args.config)
     changes = {}
@@ -46,7 +46,7 @@ def _run(args: argparse.Namespace) -> None:
 
 
 def _status(args: argparse.Namespace) -> None:
-    from lonlib.experiment import run_status, status
+    from lonlib.experiment.running import run_status, status
 
     print(status(args.dir).to_string(index=False))
     if args.runs:
@@ -55,10 +55,10 @@ def _status(args: argparse.Namespace) -> None:
 
 
 def _lon(args: argparse.Namespace) -> None:
-    from lonlib.lon import build_lon, cmlon
-    from lonlib.lon_io import to_graphml, to_trace
-    from lonlib.lon_metrics import metrics_table
-    from lonlib.store import read_experiment_trials
+    from lonlib.lon.graphs import build_lon, cmlon
+    from lonlib.lon.io import to_graphml, to_trace
+    from lonlib.lon.metrics import metrics_table
+    from lonlib.storage.store import read_experiment_trials
 
     root = Path(args.dir)
     trials = read_experiment_trials(root)
@@ -80,9 +80,9 @@ def _lon(args: argparse.Namespace) -> None:
 
 
 def _analyse(args: argparse.Namespace) -> None:
-    from lonlib.analysis import analyse
-    from lonlib.claims_report import claims_markdown, splice_readme
-    from lonlib.summary import splice_summary, summary_markdown
+    from lonlib.analysis.claims_report import claims_markdown, splice_readme
+    from lonlib.analysis.pipeline import analyse
+    from lonlib.analysis.summary import splice_summary, summary_markdown
 
     readme = Path(args.readme) if args.readme else None
     if readme is not None:  # refuse a README without the markers before any work
@@ -109,7 +109,7 @@ def _analyse(args: argparse.Namespace) -> None:
 
 
 def _record(args: argparse.Namespace) -> None:
-    from lonlib.analysis import record_optima
+    from lonlib.analysis.pipeline import record_optima
 
     paths = record_optima(args.dir, bins=args.bins, limit=args.limit)
     for path in paths:
@@ -118,7 +118,7 @@ def _record(args: argparse.Namespace) -> None:
 
 
 def _verify(args: argparse.Namespace) -> None:
-    from lonlib.verify import verify_experiment
+    from lonlib.analysis.verify import verify_experiment
 
     report = verify_experiment(args.dir, recordings=not args.no_recordings)
     shown = report.findings if args.all else report.findings[: args.limit]
@@ -132,9 +132,9 @@ def _verify(args: argparse.Namespace) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> None:
-    from lonlib.calibration import load_calibration, run_calibration, with_overrides
-    from lonlib.calibration_report import readme_markers
-    from lonlib.readme_tables import splice
+    from lonlib.calibration.report import readme_markers
+    from lonlib.calibration.study import load_calibration, run_calibration, with_overrides
+    from lonlib.util.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
     readme = Path(args.readme) if args.readme else None

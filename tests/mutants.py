@@ -34,11 +34,19 @@ class Mutant:
     why: str
 
 
-DDPG, BH, SIM = "lonlib/ddpg.py", "lonlib/basin_hopping.py", "lonlib/pendulum.py"
-LEAN, AUTOGRAD = "lonlib/ddpg_update.py", "lonlib/ddpg_autograd.py"
-REPLAY, STREAMS, LOCKSTEP = "lonlib/replay.py", "lonlib/random_streams.py", "lonlib/lockstep.py"
-ROLLOUT, NETS, PMATH = "lonlib/rollout.py", "lonlib/nets.py", "lonlib/portable_math.py"
-BEHAVIOUR, VERIFY = "lonlib/behaviour.py", "lonlib/verify.py"
+DDPG, BH, SIM = "lonlib/ddpg/trainer.py", "lonlib/search/algorithm.py", "lonlib/task/pendulum.py"
+LEAN, AUTOGRAD = "lonlib/ddpg/lean.py", "lonlib/ddpg/reference.py"
+REPLAY, STREAMS, LOCKSTEP = (
+    "lonlib/ddpg/replay.py",
+    "lonlib/ddpg/streams.py",
+    "lonlib/experiment/lockstep.py",
+)
+ROLLOUT, NETS, PMATH = (
+    "lonlib/task/rollout.py",
+    "lonlib/task/policy.py",
+    "lonlib/util/portable_math.py",
+)
+BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],

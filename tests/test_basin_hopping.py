@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from lonlib.basin_hopping import (
+from lonlib.ddpg.trainer import DDPGConfig
+from lonlib.search.algorithm import (
     BasinHoppingConfig,
     LocalOptimum,
     RunState,
@@ -12,9 +13,8 @@ from lonlib.basin_hopping import (
     ddpg_local_search,
     trial_seeds,
 )
-from lonlib.ddpg import DDPGConfig
-from lonlib.nets import actor_spec, critic_spec
-from lonlib.pendulum import PendulumConfig
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec, critic_spec
 
 START = (np.zeros(6, dtype=np.float32), np.zeros(4, dtype=np.float32))
 

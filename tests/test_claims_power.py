@@ -1,4 +1,4 @@
-"""The power table (lonlib.claims_power): deterministic, more runs for a smaller effect,
+"""The power table (lonlib.analysis.claims_power): deterministic, more runs for a smaller effect,
 power rising with n, and the cost columns following the documented rates."""
 
 import math
@@ -7,8 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib import claims_power
-from lonlib.claims_power import (
+from lonlib.analysis.claims_power import (
     AGENT_STEPS_PER_CORE_SECOND,
     ENV_STEPS_PER_RUN,
     FLOP_PER_AGENT_STEP,
@@ -21,6 +20,7 @@ from lonlib.claims_power import (
     runs_smaller_p_better,
     units_needed,
 )
+from lonlib.analysis.pipeline import claims_power
 
 
 def test_the_table_has_a_row_per_claim_and_is_deterministic():

@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lonlib  # noqa: F401  (registers the environment)
-from lonlib.env import ENV_ID
+from lonlib.task.env import ENV_ID
 
 
 @pytest.mark.parametrize("n_carts", [1, 2, 5])

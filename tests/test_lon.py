@@ -5,7 +5,7 @@ import warnings
 import pandas as pd
 import pytest
 
-from lonlib.lon import (
+from lonlib.lon.graphs import (
     FitnessSpreadWarning,
     build_lon,
     cmlon,
@@ -15,7 +15,7 @@ from lonlib.lon import (
     node_id,
     sinks,
 )
-from lonlib.lon_io import from_trace
+from lonlib.lon.io import from_trace
 
 
 def trials(rows, p=1e-4):

@@ -6,9 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lonlib.nets import actor_spec
-from lonlib.pendulum import PendulumConfig
-from lonlib.record import (
+from lonlib.analysis.recordings import (
     APP_ID,
     record,
     recorded_entities,
@@ -18,7 +16,9 @@ from lonlib.record import (
     scene,
     scene_bounds,
 )
-from lonlib.rollout import run_actors
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec
+from lonlib.task.rollout import run_actors
 
 
 def test_recording_reads_back_with_entities_and_frames(tmp_path):

@@ -1,0 +1,1 @@
+"""The global search: parameter-level basin hopping (paper Algorithm 2)."""

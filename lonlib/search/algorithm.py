@@ -1,0 +1,275 @@
+"""Parameter-level basin hopping (paper Algorithm 2) with a pluggable local search.
+
+Like :func:`scipy.optimize.basinhopping`, the global search only perturbs and accepts; the
+local search is any callable ``F(theta, omega, seed) -> LocalOptimum`` (by default DDPG via
+:func:`ddpg_local_search`, a fast deterministic stand-in in the tests). Algorithm 2 as
+written: start from random parameters, run ``F``; then repeatedly add U[-p, p] to **every**
+Actor and Critic parameter of the incumbent, run ``F`` again and accept when ``f >= f*``
+(equal fitness is accepted); the failure counter resets on acceptance and the run ends after
+``tolerance`` consecutive failures, or after ``max_local_searches`` (so that a run always
+ends). Every local search is recorded as a :class:`Trial`, accepted or not, with its parent.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from lonlib.util.validation import check_field_types, check_range
+
+
+@dataclass(frozen=True)
+class BasinHoppingConfig:
+    """Algorithm 2's inputs: perturbation strength ``p``, tolerance ``T``, a budget."""
+
+    perturbation: float = 1e-4
+    tolerance: int = 5
+    max_local_searches: int = 100
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        check_range("perturbation", self.perturbation, 0.0, 10.0, low_open=True)
+        check_range("tolerance", self.tolerance, 1, 10_000)
+        check_range("max_local_searches", self.max_local_searches, 1, 1_000_000)
+
+
+@dataclass(frozen=True)
+class LocalOptimum:
+    """What a local search returns: fitness and the parameters reached, and what it knows
+    of its start (NaN when a stand-in does not say)."""
+
+    fitness: float
+    theta: np.ndarray
+    omega: np.ndarray
+    env_steps: int = 0
+    history: list[dict] | None = None  # per-episode training record, if the search keeps one
+    start_fitness: float = float("nan")  # fitness of the (perturbed) start parameters
+    stop_reason: str = ""  # why the local search stopped ("patience", "budget")
+    behaviour: dict | None = None  # flat behaviour descriptor columns and label, if described
+
+    @property
+    def improved(self) -> bool:
+        """Did the local search return something strictly fitter than its start?"""
+        return bool(self.fitness > self.start_fitness)
+
+
+LocalSearch = Callable[[np.ndarray, np.ndarray, int], LocalOptimum]
+"""``F(theta, omega, seed)``: environment and hyperparameters are bound in the callable."""
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One local search of a run. ``parent`` is the index of the incumbent it was perturbed
+    from (-1 for the first, which starts from random parameters)."""
+
+    index: int
+    parent: int
+    fitness: float
+    accepted: bool
+    seconds: float
+    env_steps: int
+    start_fitness: float = float("nan")  # fitness of the perturbed start, before training
+    improved: bool = False  # the local search returned something fitter than its start
+    stop_reason: str = ""  # why the local search stopped
+    behaviour: dict = dataclasses.field(default_factory=dict)  # lonlib.task.behaviour columns
+
+
+@dataclass
+class RunState:
+    """Where a run stands; enough to resume it after its last finished local search."""
+
+    trials: list[Trial]
+    incumbent: LocalOptimum | None
+    incumbent_index: int
+    failures: int
+    end_reason: str | None = None  # "tolerance" or "budget" once the run has ended
+
+    @property
+    def finished(self) -> bool:
+        """True once the run has met its tolerance or its budget."""
+        return self.end_reason is not None
+
+    def record(
+        self, trial: Trial, optimum: LocalOptimum | None, config: BasinHoppingConfig
+    ) -> None:
+        """Algorithm 2's bookkeeping after one local search: the incumbent moves on
+        acceptance and the failure counter resets; T failures or the budget end the run.
+        ``optimum`` may be None when replaying stored trials (the caller loads the final
+        incumbent's parameters)."""
+        self.trials.append(trial)
+        if trial.accepted:
+            self.incumbent, self.incumbent_index, self.failures = optimum, trial.index, 0
+        else:
+            self.failures += 1
+        if self.failures >= config.tolerance:
+            self.end_reason = "tolerance"
+        elif len(self.trials) >= config.max_local_searches:
+            self.end_reason = "budget"
+
+
+def perturb(values: np.ndarray, strength: float, rng: np.random.Generator) -> np.ndarray:
+    """Add U[-p, p] independently to every parameter (float32 in, float32 out)."""
+    noise = rng.uniform(-strength, strength, size=values.shape)
+    return (values.astype(np.float64) + noise).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class TrialSeeds:
+    """Independent random streams of one trial, spawned from ``(run seed, trial index)``:
+    the perturbation's, and the local search's (DDPG's warm-up, noise, sampling and start
+    noise). Greedy evaluations use the local search's own fixed stream (``eval_seed``) so
+    that fitness is a function of the parameters alone."""
+
+    perturbation: int
+    local_search: int
+
+
+def trial_seeds(run_seed: int, index: int) -> TrialSeeds:
+    """The random streams of trial ``index`` of a run: a pure function of both."""
+    perturbation, local = np.random.SeedSequence([run_seed, index]).spawn(2)
+    return TrialSeeds(
+        perturbation=int(perturbation.generate_state(1, np.uint64)[0]),
+        local_search=int(local.generate_state(1, np.uint64)[0]),
+    )
+
+
+@dataclass(frozen=True)
+class SearchRequest:
+    """The next local search a run asks for: trial ``index`` from ``theta``/``omega``
+    (perturbed from incumbent ``parent``, -1 for the random start) with DDPG seed ``seed``."""
+
+    index: int
+    parent: int
+    theta: np.ndarray
+    omega: np.ndarray
+    seed: int
+
+
+class BasinHoppingRun:
+    """Algorithm 2 for one run, one local search at a time, with the local search run by
+    the caller: :meth:`next_search` says what to search, :meth:`record` takes the optimum.
+
+    The perturbation of trial ``i`` and the local search's seed are independent streams
+    derived only from ``(run_seed, i)`` (:func:`trial_seeds`), so a run resumed from a stored
+    ``state``, or driven by any executor, continues exactly as an uninterrupted one would.
+    """
+
+    def __init__(
+        self,
+        initial: tuple[np.ndarray, np.ndarray],
+        config: BasinHoppingConfig,
+        run_seed: int,
+        state: RunState | None = None,
+    ) -> None:
+        self.initial, self.config, self.run_seed = initial, config, run_seed
+        self.state = state or RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
+
+    @property
+    def finished(self) -> bool:
+        """True once the run has met its tolerance or its budget."""
+        return self.state.finished
+
+    def next_search(self) -> SearchRequest:
+        """The next trial's start parameters and seed: the random start first, then the
+        incumbent plus U[-p, p] on every Actor and Critic parameter."""
+        if self.finished:
+            raise RuntimeError("the run has ended; it asks for no more local searches")
+        state = self.state
+        index = len(state.trials)
+        seeds = trial_seeds(self.run_seed, index)
+        if state.incumbent is None:
+            theta, omega, parent = self.initial[0], self.initial[1], -1
+        else:
+            rng = np.random.default_rng(seeds.perturbation)
+            theta = perturb(state.incumbent.theta, self.config.perturbation, rng)
+            omega = perturb(state.incumbent.omega, self.config.perturbation, rng)
+            parent = state.incumbent_index
+        return SearchRequest(index, parent, theta, omega, seeds.local_search)
+
+    def record(self, request: SearchRequest, optimum: LocalOptimum, seconds: float) -> Trial:
+        """Accept (``f >= f*``) or reject the optimum of ``request`` and return its trial."""
+        state = self.state
+        if request.index != len(state.trials):
+            raise ValueError(f"trial {request.index} recorded, trial {len(state.trials)} due")
+        accepted = state.incumbent is None or optimum.fitness >= state.incumbent.fitness
+        trial = Trial(
+            index=request.index,
+            parent=request.parent,
+            fitness=float(optimum.fitness),
+            accepted=accepted,
+            seconds=seconds,
+            env_steps=optimum.env_steps,
+            start_fitness=float(optimum.start_fitness),
+            improved=optimum.improved,
+            stop_reason=optimum.stop_reason,
+            behaviour=dict(optimum.behaviour or {}),
+        )
+        state.record(trial, optimum, self.config)
+        return trial
+
+
+def basin_hopping_steps(
+    local_search: LocalSearch,
+    initial: tuple[np.ndarray, np.ndarray],
+    config: BasinHoppingConfig,
+    run_seed: int,
+    state: RunState | None = None,
+) -> Iterator[tuple[RunState, Trial, LocalOptimum]]:
+    """Run Algorithm 2 one local search at a time, yielding after each.
+
+    ``initial`` holds the random starting Actor and Critic; see :class:`BasinHoppingRun`.
+    The caller stores each yielded trial before asking for the next.
+    """
+    run = BasinHoppingRun(initial, config, run_seed, state)
+    while not run.finished:
+        request = run.next_search()
+        start = time.perf_counter()
+        optimum = local_search(request.theta, request.omega, request.seed)
+        trial = run.record(request, optimum, time.perf_counter() - start)
+        yield run.state, trial, optimum
+
+
+def basin_hopping(
+    local_search: LocalSearch,
+    initial: tuple[np.ndarray, np.ndarray],
+    config: BasinHoppingConfig,
+    run_seed: int,
+) -> RunState:
+    """Run Algorithm 2 to its end and return the finished state (all trials, the best)."""
+    *_, (state, _, _) = basin_hopping_steps(local_search, initial, config, run_seed)
+    return state
+
+
+def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSearch:
+    """The paper's ``F``: the DDPG local search bound to an environment and ``h``. With
+    ``describe_optima`` every optimum also gets its behaviour descriptor and label
+    (:mod:`lonlib.task.behaviour`) from one greedy rollout plus a batch of perturbed starts."""
+    from lonlib.ddpg.trainer import local_search
+
+    def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
+        result = local_search(theta, omega, env_config, hp, seed)
+        return local_optimum(result, env_config, hp, describe_optima)
+
+    return search
+
+
+def local_optimum(result, env_config, hp, describe_optima: bool = True) -> LocalOptimum:
+    """A DDPG :class:`lonlib.ddpg.trainer.LocalSearchResult` as Algorithm 2's :class:`LocalOptimum`
+    (with its behaviour descriptor when ``describe_optima``)."""
+    from lonlib.task.behaviour import describe_columns
+
+    behaviour = describe_columns(result.theta, env_config, hp.scoring) if describe_optima else None
+    return LocalOptimum(
+        fitness=result.fitness,
+        theta=result.theta,
+        omega=result.omega,
+        env_steps=result.env_steps,
+        history=[dataclasses.asdict(record) for record in result.history],
+        start_fitness=result.start_fitness,
+        stop_reason=result.stop_reason,
+        behaviour=behaviour,
+    )
