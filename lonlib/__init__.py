@@ -11,9 +11,7 @@ from lonlib.util.cpu_kernels import pin_torch_cpu_kernels as _pin
 
 _pin()
 
-import gymnasium as _gym  # noqa: E402
-
-from lonlib.task.env import ENV_ID  # noqa: E402
+from lonlib.task.env import ENV_ID, register_envs  # noqa: E402
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig  # noqa: E402
 from lonlib.task.rollout import Rollout, evaluate  # noqa: E402
 
@@ -21,8 +19,7 @@ Evaluation = Rollout  # the name ``evaluate`` returned before the one rollout
 
 __version__ = "0.1.0"
 
-if ENV_ID not in _gym.registry:
-    _gym.register(id=ENV_ID, entry_point="lonlib.task.env:CoupledPendulumEnv")
+register_envs()
 
 __all__ = [
     "ENV_ID",

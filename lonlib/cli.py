@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import logging
 import sys
 from pathlib import Path
 
@@ -13,6 +12,7 @@ import pandas as pd
 
 from lonlib.experiment.executors import EXECUTORS
 from lonlib.storage.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
+from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
 
 
@@ -64,14 +64,14 @@ def _lon(args: argparse.Namespace) -> None:
     trials = read_experiment_trials(root)
     if trials.empty:
         raise SystemExit(f"lonlib: no stored trials under {root}")
-    table = metrics_table(trials, "max", args.tolerance)
+    table = metrics_table(trials, "max", args.fitness_tolerance)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     out = Path(args.out) if args.out else root / "lon"
     out.mkdir(parents=True, exist_ok=True)
     table.to_csv(out / "metrics.csv", index=False)
     for p, group in trials.groupby("p"):
-        graph = build_lon(group, "max", args.tolerance, full=args.full)
+        graph = build_lon(group, "max", args.fitness_tolerance, full=args.full)
         stem = f"lon_p={p_label(p)}" + ("_full" if args.full else "")
         to_graphml(graph, out / f"{stem}.graphml")
         to_trace(graph, out / f"{stem}.trace")
@@ -90,7 +90,11 @@ def _analyse(args: argparse.Namespace) -> None:
             raise ValueError(f"--readme {readme}: no such file")
         splice_summary(splice_readme(readme.read_text(), "", args.dir), "", args.dir)
     result = analyse(
-        args.dir, seed=args.seed, tolerance=args.tolerance, bins=args.bins, close_figures=True
+        args.dir,
+        seed=args.seed,
+        fitness_tolerance=args.fitness_tolerance,
+        bins=args.bins,
+        close_figures=True,
     )
     verdicts = result.claims[["claim", "verdict", "evidence"]]
     with pd.option_context("display.width", 200, "display.max_colwidth", 120):
@@ -132,8 +136,8 @@ def _verify(args: argparse.Namespace) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> None:
+    from lonlib.calibration import load_calibration, run_calibration, with_overrides
     from lonlib.calibration.report import readme_markers
-    from lonlib.calibration.study import load_calibration, run_calibration, with_overrides
     from lonlib.util.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
@@ -151,6 +155,33 @@ def _calibrate(args: argparse.Namespace) -> None:
         print(result.cells.drop(columns=["seconds"]).to_string(index=False))
         print(result.drift.to_string(index=False))
     print(f"tables and figure written to {args.out}")
+
+
+class DeprecatedFlag(argparse.Action):
+    """An option's old spelling: stores to the new one and says so on stderr."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        """Store ``values`` under the new name and print the new spelling."""
+        print(
+            f"lonlib: {option_string} is deprecated, use --{self.dest.replace('_', '-')}",
+            file=sys.stderr,
+        )
+        setattr(namespace, self.dest, values)
+
+
+def add_fitness_tolerance(parser: argparse.ArgumentParser) -> None:
+    """``--fitness-tolerance``: two fitness values closer than this are equal in the LON (the
+    old spelling ``--tolerance`` still works; tolerance alone is Algorithm 2's T)."""
+    parser.add_argument(
+        "--fitness-tolerance", type=float, default=1e-9, help="fitness equality in the LON"
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        dest="fitness_tolerance",
+        action=DeprecatedFlag,
+        help=argparse.SUPPRESS,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -194,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     lon = sub.add_parser("lon", help="print LON metrics per p and write exports")
     lon.add_argument("dir")
     lon.add_argument("--full", action="store_true", help="add rejected trials (worsening)")
-    lon.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality tolerance")
+    add_fitness_tolerance(lon)
     lon.add_argument("--out", help="export folder (default DIR/lon)")
     lon.set_defaults(func=_lon)
 
@@ -204,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     analysis.add_argument("dir", help="experiment folder, e.g. data/reference")
     analysis.add_argument("--seed", type=int, default=0, help="layout seed of the 3-D LON")
-    analysis.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality")
+    add_fitness_tolerance(analysis)
     analysis.add_argument("--bins", type=int, default=50, help="histogram bins on [0, 1]")
     analysis.add_argument(
         "--readme",
@@ -249,17 +280,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     calibrate.set_defaults(func=_calibrate)
     return parser
-
-
-def show_lonlib_messages() -> None:
-    """Print lonlib's informational messages (a resumed batch, a stale checkpoint) on
-    stderr, once per process."""
-    logger = logging.getLogger("lonlib")
-    if not logger.handlers:
-        handler = logging.StreamHandler()
-        handler.setFormatter(logging.Formatter("lonlib: %(message)s"))
-        logger.addHandler(handler)
-        logger.setLevel(logging.INFO)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -47,12 +47,15 @@ ROLLOUT, NETS, PMATH = (
     "lonlib/util/portable_math.py",
 )
 BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
+CONFIGS, CHECKPOINTS = "lonlib/storage/configs.py", "lonlib/experiment/checkpoints.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     STREAMS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py"],
+    CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
+    CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py", "tests/test_lockstep.py"],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
@@ -218,10 +221,10 @@ MUTANTS = [
         "a slot holding another start than its run asks for is resumed",
     ),
     Mutant(
-        LOCKSTEP,
-        "same = hp == config.ddpg and env_config == config.env",
-        "same = env_config == config.env",
-        "a batch trained with other threads or device is resumed",
+        CHECKPOINTS,
+        'for prefix, ours, theirs in (("", hp, hp_theirs), ("env.", env_config, env_theirs)):',
+        'for prefix, ours, theirs in (("env.", env_config, env_theirs),):',
+        "a batch trained with other DDPG settings (threads, device) is resumed",
     ),
     # --- DDPG: what F returns
     Mutant(
@@ -236,7 +239,7 @@ MUTANTS = [
         "search.result.theta, search.result.omega = theta.copy(), search.omega.copy()",
         "start Critic returned",
     ),
-    Mutant(DDPG, "count_start: bool = False", "count_start: bool = True", "start counted"),
+    Mutant(CONFIGS, "count_start: bool = False", "count_start: bool = True", "start counted"),
     Mutant(
         DDPG,
         "candidate = trained | hp.count_start",
@@ -434,8 +437,8 @@ MUTANTS = [
     ),
     Mutant(
         SIM,
-        "upright_each = cos > self._cos_upright",
-        "upright_each = cos < self._cos_upright",
+        "upright_each = (cos > self._cos_upright)",
+        "upright_each = (cos < self._cos_upright)",
         "upright test inverted",
     ),
     Mutant(

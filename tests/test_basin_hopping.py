@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.ddpg.trainer import DDPGConfig
 from lonlib.search.algorithm import (
     BasinHoppingConfig,
@@ -10,7 +11,6 @@ from lonlib.search.algorithm import (
     RunState,
     basin_hopping,
     basin_hopping_steps,
-    ddpg_local_search,
     trial_seeds,
 )
 from lonlib.task.pendulum import PendulumConfig

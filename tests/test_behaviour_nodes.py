@@ -1,4 +1,4 @@
-"""Claim d's behaviour nodes (lonlib.lon.behaviour_nodes) on hand-built descriptor tables: close
+"""Claim d's behaviour nodes (lonlib.lon.behaviour_space) on hand-built descriptor tables: close
 behaviours with close fitness are one node, far behaviours or far fitness are not, runs
 meeting at a node make it multi-inward, and the standardisation is the documented one."""
 
@@ -11,7 +11,7 @@ from lonlib.analysis.claims import (
     BEHAVIOUR_NODE_FEATURES,
     BEHAVIOUR_NODE_FITNESS_TOLERANCE,
 )
-from lonlib.lon.behaviour_nodes import (
+from lonlib.lon.behaviour_space import (
     behaviour_features,
     behaviour_node_curve,
     behaviour_nodes,

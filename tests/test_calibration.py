@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 import lonlib.calibration.study as calibration
+from lonlib.calibration.campaign import run_calibration
 from lonlib.calibration.report import search_table
 from lonlib.calibration.study import (
     CELL_COLUMNS,
@@ -18,7 +19,6 @@ from lonlib.calibration.study import (
     integrator_drift,
     load_calibration,
     named_calibration,
-    run_calibration,
 )
 from lonlib.cli import main as cli_main
 from lonlib.task.behaviour import LABELS, describe, label

@@ -20,7 +20,7 @@ from lonlib.analysis.claims_power import (
     runs_smaller_p_better,
     units_needed,
 )
-from lonlib.analysis.pipeline import claims_power
+from lonlib.analysis import claims_power
 
 
 def test_the_table_has_a_row_per_claim_and_is_deterministic():

@@ -83,3 +83,10 @@ def test_render_rgb_array_draws_carts_and_rods():
     no_render = gym.make(ENV_ID)
     no_render.reset(seed=0)
     assert no_render.render() is None
+
+
+def test_v0_is_deprecated_and_makes_the_v1_environment():
+    with pytest.warns(DeprecationWarning, match="CoupledPendulum-v1"):
+        old = gym.make("lonlib/CoupledPendulum-v0", n_carts=1)
+    assert ENV_ID == "lonlib/CoupledPendulum-v1"
+    assert old.unwrapped.config == gym.make(ENV_ID, n_carts=1).unwrapped.config

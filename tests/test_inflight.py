@@ -997,9 +997,9 @@ def test_a_checkpoint_resumes_in_a_package_whose_trainer_moved_and_was_renamed(w
     package = Path(lonlib.__file__).parent
     copy = tmp_path / "moved" / "lonlib"
     shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    (copy / "ddpg.py").rename(copy / "trainers_moved.py")
-    for path in copy.glob("*.py"):
-        text = re.sub(r"\blonlib\.ddpg\b", "lonlib.trainers_moved", path.read_text())
+    (copy / "ddpg" / "trainer.py").rename(copy / "trainers_moved.py")
+    for path in copy.rglob("*.py"):
+        text = re.sub(r"\blonlib\.ddpg\.trainer\b", "lonlib.trainers_moved", path.read_text())
         path.write_text(text.replace("SlotTrainer", "RenamedTrainer"))
     script = tmp_path / "resume.py"
     script.write_text(MOVED)

@@ -99,3 +99,9 @@ def test_a_recording_carries_and_replays_its_scored_episode(tmp_path):
     assert (props["p"], props["run"], props["index"]) == (1e-3, 2, 4)
     assert props["fitness_all"] == scored.fitness_all[0]
     assert episode.trace.fitness[-1, 0] == scored.fitness[0]
+
+
+def test_recording_names_follow_one_scheme():
+    name = recording_name(1e-4, 3, 0.372, role="label-best", behaviour="crash")
+    assert name == "label-best_crash_optimum_p=0.0001_run=3_f=0.372.rrd"
+    assert recording_name(1e-3, 1, 0.5, role="best") == "best_optimum_p=0.001_run=1_f=0.500.rrd"

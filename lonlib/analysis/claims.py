@@ -71,10 +71,11 @@ from scipy.signal import find_peaks
 from lonlib.analysis.effect_size import compare_greater
 from lonlib.analysis.peaks import compare_with_paper, detect_peaks
 from lonlib.lon.behaviour import behavioural_lon
-from lonlib.lon.behaviour_nodes import behaviour_node_curve, behaviour_nodes
+from lonlib.lon.behaviour_space import behaviour_node_curve, behaviour_nodes
 from lonlib.lon.graphs import build_lon, mlon, sinks
 from lonlib.lon.metrics import node_metrics
 from lonlib.storage.store import p_label, read_finished_trials
+from lonlib.util.deprecation import renamed_keyword
 
 REPRODUCED = "reproduced"
 CONTRADICTED = "contradicted"
@@ -236,11 +237,12 @@ class Landscape:
         return any(label for _, label in self.graph.nodes(data="label", default=""))
 
 
-def landscapes(trials: pd.DataFrame, tolerance: float = 1e-9) -> dict[float, Landscape]:
+@renamed_keyword("tolerance", "fitness_tolerance")
+def landscapes(trials: pd.DataFrame, fitness_tolerance: float = 1e-9) -> dict[float, Landscape]:
     """One :class:`Landscape` per stored p, in increasing p."""
     out = {}
     for p, group in trials.groupby("p", sort=True):
-        graph = build_lon(group, "max", tolerance)
+        graph = build_lon(group, "max", fitness_tolerance)
         fitness = dict(graph.nodes(data="fitness"))
         out[float(p)] = Landscape(
             p=float(p),
@@ -537,7 +539,7 @@ def _label_level(land: Landscape) -> str:
 
 
 def claim_sparse(land: Landscape) -> Claim:
-    """Claim d in behaviour space (:mod:`lonlib.lon.behaviour_nodes`, the pre-registered
+    """Claim d in behaviour space (:mod:`lonlib.lon.behaviour_space`, the pre-registered
     :data:`BEHAVIOUR_NODE_FEATURES`, :data:`BEHAVIOUR_NODE_EPSILON` and
     :data:`BEHAVIOUR_NODE_FITNESS_TOLERANCE`): the share of behaviour nodes entered by
     edges from more than one other node. Reproduced when it is at most
@@ -598,7 +600,7 @@ def claim_sparse(land: Landscape) -> Claim:
 
 def claim_d_curve(trials: pd.DataFrame, epsilons=BEHAVIOUR_NODE_CURVE) -> pd.DataFrame:
     """Claim d's share of multi-inward behaviour nodes per p over ``epsilon``
-    (:func:`lonlib.lon.behaviour_nodes.behaviour_node_curve` with the pre-registered features
+    (:func:`lonlib.lon.behaviour_space.behaviour_node_curve` with the pre-registered features
     and fitness tolerance) with its Clopper-Pearson interval at :data:`CONFIDENCE`
     (``ci_low``, ``ci_high``); empty without behaviour descriptors."""
     curve = behaviour_node_curve(
@@ -658,15 +660,16 @@ def claim_gap(land: Landscape) -> Claim:
     )
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def claims_from_trials(
     trials: pd.DataFrame,
     bins: int = 50,
-    tolerance: float = 1e-9,
+    fitness_tolerance: float = 1e-9,
     resamples: int = BOOTSTRAP_RESAMPLES,
     seed: int = BOOTSTRAP_SEED,
 ) -> pd.DataFrame:
     """The claims table of stored trials (see the module docstring), rows a to e."""
-    by_p = landscapes(trials, tolerance)
+    by_p = landscapes(trials, fitness_tolerance)
     land = by_p[examined_p(list(by_p))]
     rows = [
         claim_multimodal(land, bins, resamples, seed),
@@ -678,13 +681,14 @@ def claims_from_trials(
     return pd.DataFrame([asdict(row) for row in rows])
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def peaks_beside_paper(
-    trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e-9
+    trials: pd.DataFrame, bins: int = 50, fitness_tolerance: float = 1e-9
 ) -> pd.DataFrame:
     """At the examined p, each of the paper's peaks beside the nearest peak detected in the
     sink histogram (Fig. 4) and in the optima histogram (Fig. 5), with their distance and
     the histogram's number of values (``values``: with few, every peak is one optimum)."""
-    by_p = landscapes(trials, tolerance)
+    by_p = landscapes(trials, fitness_tolerance)
     land = by_p[examined_p(list(by_p))]
     tables = [
         compare_with_paper(detect_peaks(values, bins=bins)).assign(
@@ -695,12 +699,15 @@ def peaks_beside_paper(
     return pd.concat(tables, ignore_index=True)
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def paper_claims(
     folder,
     bins: int = 50,
-    tolerance: float = 1e-9,
+    fitness_tolerance: float = 1e-9,
     resamples: int = BOOTSTRAP_RESAMPLES,
     seed: int = BOOTSTRAP_SEED,
 ) -> pd.DataFrame:
     """The claims table (rows a to e) of the experiment stored in ``folder``."""
-    return claims_from_trials(read_finished_trials(folder), bins, tolerance, resamples, seed)
+    return claims_from_trials(
+        read_finished_trials(folder), bins, fitness_tolerance, resamples, seed
+    )

@@ -59,6 +59,7 @@ from lonlib.storage.store import (
     read_optimum,
 )
 from lonlib.task.behaviour import descriptors_of
+from lonlib.util.deprecation import renamed_keyword
 
 
 def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
@@ -91,10 +92,11 @@ class Analysis:
     interactive: dict[str, Any] = field(default_factory=dict)
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def analyse(
     folder: str | Path,
     seed: int = 0,
-    tolerance: float = 1e-9,
+    fitness_tolerance: float = 1e-9,
     bins: int = 50,
     close_figures: bool = False,
     conditioning: bool = True,
@@ -129,7 +131,7 @@ def analyse(
     labelled = "label" in trials
     metric_rows, peak_rows, behavioural_rows = [], [], []
     for p, group in trials.groupby("p", sort=True):
-        graph = build_lon(group, "max", tolerance)
+        graph = build_lon(group, "max", fitness_tolerance)
         label = p_label(p)
         metric_rows.append({"p": p, **lon_metrics(graph)})
         name, title = f"fig3_lon_p={label}", f"3-D LON, p = {label}"
@@ -165,7 +167,7 @@ def analyse(
     result.summary = experiment_summary(folder, trials)
     tables = [("summary", result.summary), ("metrics", result.metrics), ("peaks", result.peaks)]
     if labelled:
-        result.behaviours = behaviour_table(trials, tolerance)
+        result.behaviours = behaviour_table(trials, fitness_tolerance)
         result.behavioural_metrics = pd.DataFrame(behavioural_rows)
         tables += [("behaviours", result.behaviours)]
         tables += [("metrics_behavioural", result.behavioural_metrics)]
@@ -173,8 +175,8 @@ def analyse(
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
-    result.claims = claims_from_trials(trials, bins, tolerance)
-    result.claim_peaks = peaks_beside_paper(trials, bins, tolerance)
+    result.claims = claims_from_trials(trials, bins, fitness_tolerance)
+    result.claim_peaks = peaks_beside_paper(trials, bins, fitness_tolerance)
     result.claim_d_curve = claim_d_curve(trials)
     result.power = power_table()
     result.files += write_claims(
@@ -188,11 +190,11 @@ def analyse(
     if trials["p"].nunique() > 2:
         save("sensitivity", sensitivity(result.metrics))
     if conditioning:
-        _conditioning(folder, trials, result, save, out, bins, tolerance)
+        _conditioning(folder, trials, result, save, out, bins, fitness_tolerance)
     return result
 
 
-def _conditioning(folder, trials, result, save, out, bins, tolerance) -> None:
+def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) -> None:
     """The nodes' conditioning (:mod:`lonlib.analysis.conditioning`): every stored Actor replayed
     (``replayed.csv``), nominal beside robust Figs. 4-5, the retention curve and the table
     per behaviour label; edges a re-scoring would make deteriorating."""
@@ -205,7 +207,7 @@ def _conditioning(folder, trials, result, save, out, bins, tolerance) -> None:
     curves = []
     for p, group in nodes.groupby("p", sort=True):
         label = p_label(p)
-        graph = build_lon(trials[trials["p"] == p], "max", tolerance)
+        graph = build_lon(trials[trials["p"] == p], "max", fitness_tolerance)
         sink_keys = {(graph.nodes[n]["run"], graph.nodes[n]["index"]) for n in sinks(graph)}
         is_sink = [(r, i) in sink_keys for r, i in zip(group["run"], group["index"], strict=True)]
         sink_rows = group[is_sink]
@@ -267,13 +269,19 @@ def behaviour_hover(trials: pd.DataFrame) -> dict[str, str]:
     return out
 
 
-def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e-9) -> pd.DataFrame:
+@renamed_keyword("tolerance", "fitness_tolerance")
+def optima_to_record(
+    trials: pd.DataFrame, bins: int = 50, fitness_tolerance: float = 1e-9
+) -> pd.DataFrame:
     """The best optimum of each p, per detected sink-fitness peak the sink nearest it, and
     the best optimum of each behaviour label (one row per distinct optimum: p, run, index,
-    fitness, role, behaviour). Recordings' file names carry the role and the behaviour."""
+    fitness, role, behaviour). The roles: ``best`` (the best optimum of p), ``label-best``
+    (the best optimum of its behaviour label) and ``sink-peak-<fitness>`` (the sink nearest
+    a sink-fitness peak); a recording's name carries the role and the behaviour
+    (:func:`lonlib.analysis.recordings.recording_name`)."""
     rows: dict[str, dict] = {}
     for _, group in trials.groupby("p", sort=True):
-        graph = build_lon(group, "max", tolerance)
+        graph = build_lon(group, "max", fitness_tolerance)
         chosen = [(max(graph.nodes, key=lambda n: graph.nodes[n]["fitness"]), "best")]
         by_label: dict[str, str] = {}
         for node, data in graph.nodes(data=True):
@@ -283,7 +291,7 @@ def optima_to_record(trials: pd.DataFrame, bins: int = 50, tolerance: float = 1e
                 or data["fitness"] > graph.nodes[by_label[behaviour]]["fitness"]
             ):
                 by_label[behaviour] = node
-        chosen += [(node, f"best-{slug(b)}") for b, node in by_label.items()]
+        chosen += [(node, "label-best") for node in by_label.values()]
         sink_nodes = sinks(graph)
         values = np.array([graph.nodes[n]["fitness"] for n in sink_nodes])
         for peak in detect_peaks(values, bins=bins)["fitness"]:
@@ -314,8 +322,7 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
     for row in selection.itertuples():
         optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
         behaviour = slug(row.behaviour) if row.behaviour else ""
-        role = row.role if behaviour in row.role else f"{row.role}_{behaviour}".strip("_")
-        name = recording_name(row.p, int(row.run), row.fitness, label=role)
+        name = recording_name(row.p, int(row.run), row.fitness, role=row.role, behaviour=behaviour)
         path = folder / "recordings" / name
         record(
             optimum.theta,

@@ -33,9 +33,20 @@ from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.rollout import Rollout, Scoring, run_actors
 
 
-def recording_name(p: float, run: int, fitness: float, label: str = "") -> str:
-    """File name carrying p, run and fitness, e.g. ``optimum_p=0.0001_run=3_f=0.220.rrd``."""
-    prefix = f"{label}_" if label else ""
+def recording_name(
+    p: float, run: int, fitness: float, role: str = "", behaviour: str = "", label: str = ""
+) -> str:
+    """A recording's file name; the one naming scheme of recordings.
+
+    ``[<role>_][<behaviour>_]optimum_p=<p>_run=<run>_f=<fitness>.rrd``: parts joined by
+    ``_``, words inside a part by ``-``. ``role`` says why the optimum was chosen
+    (:func:`lonlib.analysis.pipeline.optima_to_record`: ``best``, ``label-best``,
+    ``sink-peak-0.33``), ``behaviour`` is its behaviour label's slug (``spinning-in-phase``),
+    e.g. ``label-best_crash_optimum_p=0.0001_run=3_f=0.372.rrd``; without either,
+    ``optimum_p=0.0001_run=3_f=0.220.rrd``. ``label`` is the older name of ``role``.
+    """
+    parts = [part for part in (role or label, behaviour) if part]
+    prefix = "".join(f"{part}_" for part in parts)
     return f"{prefix}optimum_p={p_label(p)}_run={run}_f={fitness:.3f}.rrd"
 
 

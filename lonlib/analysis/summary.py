@@ -9,7 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.analysis.claims_report import markdown_table
-from lonlib.experiment.running import run_status
+from lonlib.storage.status import run_status
 from lonlib.storage.store import p_label, read_finished_trials
 from lonlib.util.readme_tables import splice_generated
 

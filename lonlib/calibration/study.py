@@ -33,16 +33,13 @@ its report (:mod:`lonlib.calibration.report`): ``calibration.csv`` (one row per 
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
 import io
 import math
-import multiprocessing
 import time
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -54,7 +51,6 @@ from lonlib.task.pendulum import PendulumConfig, total_energy, wrap_angle
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.task.rollout import Scoring, run_policy
 from lonlib.util import portable_math
-from lonlib.util.progress import progress_bar
 from lonlib.util.validation import (
     check_choice,
     check_field_types,
@@ -62,9 +58,6 @@ from lonlib.util.validation import (
     check_range,
     read_yaml_mapping,
 )
-
-if TYPE_CHECKING:
-    from lonlib.calibration.report import CalibrationResult
 
 MOTORS = ("force", "acceleration", "velocity")
 INTEGRATORS = ("euler", "semi-implicit")
@@ -538,49 +531,6 @@ def json_roundtrip(value: Any) -> Any:
     return value
 
 
-# ---------------------------------------------------------------------------- the study
-def run_calibration(
-    config: CalibrationConfig, out: str | Path, workers: int = 1, progress: bool = True
-) -> CalibrationResult:
-    """Run every unfinished cell of ``config`` into ``out`` and write the tables and figure.
-
-    ``workers`` > 1 runs cells in that many processes (one torch thread each; more workers
-    than unfinished cells are not started). Finished cells are read back, not recomputed;
-    a folder holding cells computed with other settings is refused before any compute.
-    """
-    check_range("workers", workers, 1, 4096)
-    out = Path(out)
-    todo = [cell for cell in config.cells if read_cell(out, cell, config) is None]
-    write_json(
-        out / "calibration.json",
-        {"config": config.to_dict(), "updated": datetime.now(UTC).isoformat(timespec="seconds")},
-    )
-    bar = progress_bar(
-        total=len(config.cells),
-        initial=len(config.cells) - len(todo),
-        desc=f"calibration {config.name}",
-        unit="cell",
-        disable=not progress,
-    )
-    try:
-        if workers <= 1 or len(todo) <= 1:
-            for cell in todo:
-                run_and_store_cell(out, cell, config)
-                bar.update(1)
-        else:
-            context = multiprocessing.get_context("spawn")
-            with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=context) as pool:
-                futures = [pool.submit(run_and_store_cell, out, cell, config) for cell in todo]
-                for future in cf.as_completed(futures):
-                    bar.set_postfix_str(future.result())
-                    bar.update(1)
-    finally:
-        bar.close()
-    from lonlib.calibration.report import write_outputs  # it reads the cells stored here
-
-    return write_outputs(config, out)
-
-
 __all__ = [
     "CELL_COLUMNS",
     "DEFAULT_CELLS",
@@ -591,7 +541,6 @@ __all__ = [
     "integrator_drift",
     "load_calibration",
     "named_calibration",
-    "run_calibration",
     "run_cell",
     "with_overrides",
 ]

@@ -36,13 +36,13 @@ import torch
 
 from lonlib.ddpg.reference import AutogradDDPG
 from lonlib.ddpg.streams import SIMD_PAD
+from lonlib.storage.configs import LEARNERS
 from lonlib.task.policy import NetSpec
 
 BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults, as the autograd reference uses
 EPS = 1e-8
 # Beyond this many steps both float32 bias-correction coefficients are exactly 1 and -lr.
 ADAM_TABLE_STEPS = 20_000
-LEARNERS = ("lean", "autograd")
 
 
 class Learner(Protocol):

@@ -45,7 +45,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lonlib.ddpg.lean import LEARNERS, learner_class
+from lonlib.ddpg.lean import learner_class
 from lonlib.ddpg.plain_state import (
     StateLayoutError,
     TensorReader,
@@ -68,101 +68,11 @@ from lonlib.ddpg.streams import (
     WARMUP_ACTIONS,
     CounterStreams,
 )
+from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
 from lonlib.task.policy import NetSpec, actor_spec, critic_spec
 from lonlib.task.rollout import Scoring, score_actors
 from lonlib.util.progress import progress_bar
-from lonlib.util.validation import check_choice, check_field_types, check_range
-
-
-@dataclass(frozen=True)
-class DDPGConfig:
-    """DDPG hyperparameters (the paper's ``h``). Paper values: buffer, batch, noise, lr,
-    gamma. Ours: tau, the warm-up and the step budget (README, "DDPG local search").
-
-    ``plateau_tiebreak``: when the greedy fitness ties the best so far, a higher greedy
-    reward return counts as progress (it keeps the parameters and resets the patience), so
-    a search on a zero-fitness plateau is judged by whether it is still getting closer.
-
-    ``count_start``: the start parameters (and greedy evaluations during the warm-up, when
-    the Actor is still the start) are candidates for the returned optimum. Off by default:
-    a basin-hopping trial is then accepted only if learning produced the optimum.
-
-    ``eval_seed``: the random stream of the greedy evaluations' start noise (used only when
-    the environment's ``initial_noise`` > 0). It is the same for every policy and every
-    trial, so an optimum's fitness is a function of its parameters alone.
-
-    ``fitness_estimate``: what a greedy evaluation scores and so what the search keeps,
-    returns and Algorithm 2 compares: ``nominal`` (Algorithm 1 from the fixed start, the
-    paper) or ``robust`` (its mean over ``robust_starts`` starts perturbed by
-    U[-``robust_noise``, ``robust_noise``], drawn from ``robust_seed``, the same for every
-    policy; :class:`lonlib.task.rollout.Scoring`). Every trial records both, whichever is used.
-
-    ``device`` and ``threads`` say where the computation runs, not what it computes.
-
-    ``update``: ``"lean"`` (:class:`lonlib.ddpg.lean.LeanDDPG`, hand-written passes, the
-    default) or ``"autograd"`` (:mod:`lonlib.ddpg.reference`, the reference); same algorithm.
-    """
-
-    buffer_size: int = 40_000
-    batch_size: int = 2000
-    noise_std: float = 0.1
-    learning_rate: float = 1e-3
-    gamma: float = 0.99
-    tau: float = 0.005
-    warmup_steps: int = 2000
-    max_steps: int = 150_000
-    min_steps: int = 60_000
-    patience_steps: int = 40_000
-    eval_seed: int = 0
-    fitness_estimate: str = "nominal"
-    robust_starts: int = 8
-    robust_noise: float = 0.01
-    robust_seed: int = 0
-    plateau_tiebreak: bool = False
-    count_start: bool = False
-    device: str = "cpu"
-    threads: int = 1
-    update: str = "lean"
-
-    @property
-    def scoring(self) -> Scoring:
-        """How greedy evaluations score a policy (:class:`lonlib.task.rollout.Scoring`)."""
-        return Scoring(
-            estimate=self.fitness_estimate,
-            starts=self.robust_starts,
-            noise=self.robust_noise,
-            seed=self.robust_seed,
-            eval_seed=self.eval_seed,
-        )
-
-    def __post_init__(self) -> None:
-        check_field_types(self)
-        for name in ("buffer_size", "batch_size", "warmup_steps", "max_steps", "patience_steps"):
-            check_range(name, getattr(self, name), 1)
-        check_range("min_steps", self.min_steps, 0)
-        check_range("eval_seed", self.eval_seed, 0, 2**63 - 1)
-        check_range("threads", self.threads, 1, 256)
-        check_range("buffer_size", self.buffer_size, 1, 2**31 - 1)
-        check_range("noise_std", self.noise_std, 0.0, 1.0)
-        check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
-        check_range("gamma", self.gamma, 0.0, 1.0)
-        check_range("tau", self.tau, 0.0, 1.0, low_open=True)
-        if self.warmup_steps > self.max_steps:
-            raise ValueError(
-                f"warmup_steps must be <= max_steps ({self.max_steps}) so that DDPG trains "
-                f"at least once, got {self.warmup_steps!r}"
-            )
-        check_choice("update", self.update, LEARNERS)
-        _ = self.scoring  # validates fitness_estimate and the robust_* fields by name
-        if self.min_steps > self.max_steps:
-            raise ValueError(
-                f"min_steps must be <= max_steps ({self.max_steps}), got {self.min_steps!r}"
-            )
-        try:
-            torch.device(self.device)
-        except RuntimeError as error:
-            raise ValueError(f"device {self.device!r} is not a torch device: {error}") from None
 
 
 @dataclass

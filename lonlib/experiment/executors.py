@@ -20,8 +20,9 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
 
-EXECUTORS = ("auto", "serial", "pool", "dask", "lockstep")
-Job = tuple[float, int]
+from lonlib.storage.configs import EXECUTORS
+from lonlib.storage.store import Job
+
 Task = Callable[[float, int], Any]
 OnDone = Callable[[Any], None]
 

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from lonlib.ddpg.search_interface import local_optimum
 from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_batch_size
 from lonlib.experiment.checkpoints import (
     CheckpointUnreadable,
@@ -45,14 +46,14 @@ from lonlib.experiment.checkpoints import (
     remove_leftovers,
     save_inflight,
 )
-from lonlib.search.algorithm import BasinHoppingRun, SearchRequest, local_optimum
+from lonlib.experiment.runs import experiment_plan, open_run, run_lock_path, run_summary
+from lonlib.search.algorithm import BasinHoppingRun, SearchRequest
 from lonlib.storage.lock import LockHeld, exclusive_lock
-from lonlib.storage.store import DataWriteError, save_step
+from lonlib.storage.store import DataWriteError, Job, save_step
 from lonlib.util.validation import check_range
 
 log = logging.getLogger(__name__)
 
-Job = tuple[float, int]
 CHECKPOINT_SECONDS = 600.0  # how often a batch writes its in-flight checkpoint
 
 
@@ -112,7 +113,6 @@ def run_lockstep(
     a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
     (it keeps the checkpoint's number of slots).
     """
-    from lonlib.experiment.running import experiment_plan, open_run, run_lock_path, run_summary
 
     check_lockstep(config.ddpg, slots)
     if checkpoint_seconds is not None:

@@ -32,7 +32,9 @@ from lonlib.experiment.checkpoints import (
     split_inflight,
 )
 from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, Job, run_lockstep
+from lonlib.experiment.runs import experiment_plan, hold_runs
 from lonlib.storage.store import DataWriteError
+from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
 
 log = logging.getLogger(__name__)
@@ -179,7 +181,6 @@ def spread_checkpoints(out: str | Path, config: Any, jobs: Sequence[Job], worker
     """Split in-flight checkpoints of ``jobs`` until there is one per worker process (or
     each holds one run), so that every process resumes searches; a checkpoint whose runs
     another process holds is left alone."""
-    from lonlib.experiment.running import experiment_plan, hold_runs
 
     wanted = set(jobs)
     plan = experiment_plan(out, config)  # a checkpoint listing other runs is refused
@@ -247,8 +248,6 @@ def _lockstep_group(
             print(f"lockstep worker {os.getpid()}: parent {parent} died; exiting", flush=True)
             os._exit(1)  # the kernel releases the run locks; stored trials are complete
         _loads[index] = info["in_flight"] + info["pending"]
-
-    from lonlib.cli import show_lonlib_messages
 
     show_lonlib_messages()  # a spawned process: its messages would be lost otherwise
     summaries: list[dict[str, Any]] = []

@@ -18,31 +18,32 @@ import errno
 import logging
 import time
 import warnings
-from collections.abc import Iterator, Sequence
-from contextlib import ExitStack, contextmanager
 from functools import partial
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.ddpg.trainer import check_device
 from lonlib.experiment.checkpoints import (
-    Plan,
     checkpoint_lock_path,
-    inflight_checkpoints,
     remove_inflight,
     scan_inflight,
 )
 from lonlib.experiment.executors import execute_runs, resolve_executor
 from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_lockstep
 from lonlib.experiment.lockstep_workers import run_lockstep_processes
-from lonlib.search.algorithm import (
-    BasinHoppingRun,
-    RunState,
-    ddpg_local_search,
+from lonlib.experiment.runs import (  # noqa: F401  (re-exported: they lived here)
+    MANIFEST_LOCK,
+    RUN_LOCK,
+    experiment_plan,
+    hold_runs,
+    initial_parameters,
+    open_run,
+    run_lock_path,
+    run_summary,
 )
 from lonlib.storage.configs import (  # noqa: F401  (re-exported: configurations used to live here)
     EXECUTION_ONLY_DDPG_FIELDS,
@@ -61,37 +62,21 @@ from lonlib.storage.manifest import (
 )
 from lonlib.storage.provenance import session_provenance
 from lonlib.storage.result_path import RESULT_PATH_VERSION
+from lonlib.storage.status import experiment_status, run_status  # noqa: F401  (re-exported)
 from lonlib.storage.store import (
     DataWriteError,
     check_output_folder,
     load_run_state,
     read_experiment_trials,
-    read_manifest,
-    read_trials,
     remove_temporary_files,
-    replay_trials,
-    run_dir,
     save_step,
-    trials_path,
     write_json,
 )
-from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.util.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
 
 log = logging.getLogger(__name__)
-
-RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
-MANIFEST_LOCK = ".manifest.lock"  # in the experiment folder: guards manifest check + update
-
-
-# ---------------------------------------------------------------------------- one run
-def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np.ndarray, ...]:
-    """Algorithm 2's random initial Actor and Critic for run ``(p, run)``."""
-    rng = np.random.default_rng([config.run_seed(p, run), 1])
-    n = config.env.n_carts
-    return actor_spec(n).initial(rng), critic_spec(n).initial(rng)
 
 
 def run_one(
@@ -111,49 +96,6 @@ def run_one(
             return _run_locked(Path(out), config, p, run)
     except LockHeld as held:
         return {"p": p, "run": run, "held_by": held.holder}
-
-
-def run_lock_path(out: Path, p: float, run: int) -> Path:
-    """The lock file held by the one process writing run ``(p, run)``."""
-    return run_dir(Path(out), p, run) / RUN_LOCK
-
-
-@contextmanager
-def hold_runs(
-    out: Path, runs: Sequence[tuple[float, int]], also: Sequence[Path] = ()
-) -> Iterator[bool]:
-    """Hold the locks of ``runs`` (and the lock files ``also``) for the ``with`` block,
-    yielding True; yield False (holding none) if another process holds one of them."""
-    with ExitStack() as locks:
-        try:
-            for path in [*(run_lock_path(out, p, run) for p, run in runs), *also]:
-                locks.enter_context(exclusive_lock(path, wait=False))
-        except LockHeld:
-            locks.close()
-            yield False
-            return
-        yield True
-
-
-def open_run(out: Path, config: ExperimentConfig, p: float, run: int) -> BasinHoppingRun:
-    """Algorithm 2's driver of run ``(p, run)``, resumed from what is stored (call with the
-    run's lock held: a holder before us may have stored more than the caller saw)."""
-    remove_temporary_files(run_dir(out, p, run))
-    bh = config.basin_hopping(p)
-    state = load_run_state(out, p, run, bh)
-    return BasinHoppingRun(initial_parameters(config, p, run), bh, config.run_seed(p, run), state)
-
-
-def run_summary(p: float, run: int, state: RunState) -> dict[str, Any]:
-    """What an executor reports for a finished run."""
-    return {
-        "p": p,
-        "run": run,
-        "local_searches": len(state.trials),
-        "best_fitness": state.incumbent.fitness if state.incumbent else float("nan"),
-        "end_reason": state.end_reason,
-        "held_by": None,
-    }
 
 
 def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
@@ -205,18 +147,6 @@ def remove_finished_checkpoints(
             if held:
                 log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.name)
                 remove_inflight(checkpoint.metadata_path)
-
-
-def experiment_plan(out: str | Path, config: ExperimentConfig) -> Plan:
-    """The runs of the experiment in ``out`` (:data:`lonlib.experiment.checkpoints.Plan`): those of
-    ``config`` and of the configuration its manifest holds (a session may run fewer p values
-    or runs than earlier ones did)."""
-    perturbations, runs = set(config.perturbations), config.runs
-    try:
-        stored = ExperimentConfig.from_mapping(read_manifest(Path(out))["config"])
-    except Exception:  # none yet, or unreadable (sampling refuses to start then)
-        return perturbations, runs
-    return perturbations | set(stored.perturbations), max(runs, stored.runs)
 
 
 def refuse_mixed_result_paths(out: Path) -> None:
@@ -387,73 +317,4 @@ def _refresh(bar: tqdm, out: Path, done: int = 0, batch: dict | None = None) -> 
         bar.set_postfix(postfix)
 
 
-def run_status(out: str | Path) -> pd.DataFrame:
-    """One row per planned run: ``state`` (finished, started, not started) and why it
-    ended; local searches stored and accepted; ``failures``, the rejections in a row that
-    count towards the tolerance T; the best fitness; ``in_flight`` (a search of the run is
-    saved in a lockstep checkpoint, :mod:`lonlib.experiment.checkpoints`) and its
-    ``in_flight_steps``
-    (env steps; the most any checkpoint holds); and ``fitness``, the chain of stored fitness
-    values with ``x`` after each rejected one. Reads the trials and the manifest only: an
-    optimum file that is missing or damaged shows when the run resumes, not here."""
-    out = Path(out)
-    config = ExperimentConfig.from_mapping(read_manifest(out)["config"])
-    saved: dict[tuple[float, int], int] = {}
-    for checkpoint in inflight_checkpoints(out):
-        for key, steps in zip(checkpoint.runs, checkpoint.steps, strict=True):
-            saved[key] = max(saved.get(key, 0), steps)
-    rows = []
-    for p in config.perturbations:
-        bh = config.basin_hopping(p)
-        for run in range(config.runs):
-            path = trials_path(out, p, run)
-            state = replay_trials(read_trials(path), bh) if path.exists() else None
-            trials = state.trials if state is not None else []
-            rows.append(
-                {
-                    "p": p,
-                    "run": run,
-                    "state": "not started"
-                    if state is None
-                    else ("finished" if state.finished else "started"),
-                    "end_reason": (state.end_reason if state is not None else None) or "",
-                    "local_searches": len(trials),
-                    "accepted": sum(t.accepted for t in trials),
-                    "failures": state.failures if state is not None else 0,
-                    "best_fitness": trials[state.incumbent_index].fitness
-                    if state is not None and state.incumbent_index >= 0
-                    else float("nan"),
-                    "in_flight": (p, run) in saved,
-                    "in_flight_steps": saved.get((p, run), 0),
-                    "fitness": " ".join(
-                        f"{t.fitness:.3f}{'' if t.accepted else 'x'}" for t in trials
-                    ),
-                }
-            )
-    return pd.DataFrame(rows)
-
-
-def status(out: str | Path) -> pd.DataFrame:
-    """Per p: runs finished, started (interrupted or running), not started; local searches,
-    best fitness; searches in flight saved in lockstep checkpoints
-    (:mod:`lonlib.experiment.checkpoints`)
-    and their env steps. Reads the manifest for the planned runs (:func:`run_status`, summed
-    per p)."""
-    runs = run_status(out)
-    rows = []
-    for p, group in runs.groupby("p", sort=False):
-        state = group["state"]
-        rows.append(
-            {
-                "p": p,
-                "runs": len(group),
-                "finished": int((state == "finished").sum()),
-                "started": int((state == "started").sum()),
-                "not_started": int((state == "not started").sum()),
-                "local_searches": int(group["local_searches"].sum()),
-                "best_fitness": group["best_fitness"].max(),
-                "saved_in_flight": int(group["in_flight"].sum()),
-                "saved_env_steps": int(group["in_flight_steps"].sum()),
-            }
-        )
-    return pd.DataFrame(rows)
+status = experiment_status  # the name ``lonlib status`` and the notebooks call

@@ -16,7 +16,8 @@ import networkx as nx
 import numpy as np
 import pandas as pd
 
-from lonlib.lon.graphs import Transitions, _assemble, build_lon, graph_arrays, node_id, sinks
+from lonlib.lon.graphs import Transitions, assemble_lon, build_lon, graph_arrays, node_id, sinks
+from lonlib.util.deprecation import renamed_keyword
 
 
 def behaviour_groups(graph: nx.DiGraph) -> pd.Series:
@@ -38,7 +39,7 @@ def behaviour_groups(graph: nx.DiGraph) -> pd.Series:
         & (table["p"] == table["p"].shift())
         & (table["label"] != "unlabelled")  # optima without a descriptor are never merged
     )
-    close = table["fitness"].diff().abs() <= arrays.tolerance
+    close = table["fitness"].diff().abs() <= arrays.fitness_tolerance
     group = (~(same_kind & close)).cumsum()
     best = table.groupby(group)["fitness"].transform("max" if arrays.sense == "max" else "min")
     prefix = np.where(table["accepted"], "", "rejected ")
@@ -72,7 +73,7 @@ def behavioural_lon(graph: nx.DiGraph) -> nx.DiGraph:
     members = [sorted(groups.index[member_group == k]) for k in range(n)]
     labels = [graph.nodes[m[0]].get("label", "") or "unlabelled" for m in members]
     # Hops of the contracted graph: every edge repeated by its weight, member self-returns
-    # as hops from a node to itself (so _assemble counts them as self-returns).
+    # as hops from a node to itself (so assemble_lon counts them as self-returns).
     weight = arrays.weight.astype(int)
     src = np.concatenate(
         [np.repeat(member_group[arrays.source], weight), member_group.repeat(arrays.self_returns)]
@@ -91,12 +92,13 @@ def behavioural_lon(graph: nx.DiGraph) -> nx.DiGraph:
         "size": np.bincount(member_group, minlength=n),
         "members": members,
     }
-    out = _assemble(names, nodes, hops, run_ends, arrays.sense, arrays.tolerance)
+    out = assemble_lon(names, nodes, hops, run_ends, arrays.sense, arrays.fitness_tolerance)
     out.graph["behavioural"] = True
     return out
 
 
-def behaviour_table(trials: pd.DataFrame, tolerance: float = 1e-9) -> pd.DataFrame:
+@renamed_keyword("tolerance", "fitness_tolerance")
+def behaviour_table(trials: pd.DataFrame, fitness_tolerance: float = 1e-9) -> pd.DataFrame:
     """The "typical behaviours" table: per p and label, the accepted optima, the sinks
     (ends of monotonic sequences, on the MLON), their fitness range and the label's share
     of all sinks at that p. Rows are sorted by p, then by best fitness (descending)."""
@@ -104,7 +106,7 @@ def behaviour_table(trials: pd.DataFrame, tolerance: float = 1e-9) -> pd.DataFra
         raise ValueError("trials carry no behaviour labels (no 'label' column)")
     rows = []
     for p, group in trials.groupby("p", sort=True):
-        graph = build_lon(group, sense="max", tolerance=tolerance)
+        graph = build_lon(group, sense="max", fitness_tolerance=fitness_tolerance)
         sink_set = set(sinks(graph))
         accepted = group[group["accepted"].astype(bool)].fillna({"label": "unlabelled"})
         names = [node_id(p, r, i) for r, i in zip(accepted["run"], accepted["index"], strict=True)]

@@ -19,7 +19,7 @@ standard of Ochoa et al. (and of the Python peer library ``lonkit``):
 
 Graphs are plain :class:`networkx.DiGraph` objects; the heavy lifting runs on the arrays of
 :func:`graph_arrays` (numpy, scipy). The objective's sense is explicit (``sense="max"``: the
-paper maximises fitness; ``"min"`` for the usual LON benchmarks), and so is ``tolerance``:
+paper maximises fitness; ``"min"`` for the usual LON benchmarks), and so is ``fitness_tolerance``:
 two fitness values at most that far apart count as equal. Both are graph attributes that
 every function honours. The metrics live in :mod:`lonlib.lon.metrics`, the file formats in
 :mod:`lonlib.lon.io`.
@@ -38,6 +38,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from lonlib.storage.store import p_label
+from lonlib.util.deprecation import renamed_keyword
 from lonlib.util.validation import check_choice, check_range
 
 EDGE_TYPES = ("improving", "equal", "worsening")
@@ -58,20 +59,26 @@ def _node_name(label: str, run: int, index: int) -> str:
     return f"p{label}_r{run}_t{index}"
 
 
-def edge_types(f_from: np.ndarray, f_to: np.ndarray, sense: str, tolerance: float) -> np.ndarray:
+@renamed_keyword("tolerance", "fitness_tolerance")
+def edge_types(
+    f_from: np.ndarray, f_to: np.ndarray, sense: str, fitness_tolerance: float
+) -> np.ndarray:
     """Codes of :data:`EDGE_TYPES` (0 improving, 1 equal, 2 worsening) for moves, vectorised."""
     delta = np.subtract(f_to, f_from) if sense == "max" else np.subtract(f_from, f_to)
-    return np.where(np.abs(delta) <= tolerance, EQUAL, np.where(delta > 0, IMPROVING, WORSENING))
+    return np.where(
+        np.abs(delta) <= fitness_tolerance, EQUAL, np.where(delta > 0, IMPROVING, WORSENING)
+    )
 
 
-def edge_type(f_from: float, f_to: float, sense: str, tolerance: float) -> str:
+@renamed_keyword("tolerance", "fitness_tolerance")
+def edge_type(f_from: float, f_to: float, sense: str, fitness_tolerance: float) -> str:
     """``improving``, ``equal`` or ``worsening`` for a move from ``f_from`` to ``f_to``."""
-    return EDGE_TYPES[int(edge_types(f_from, f_to, sense, tolerance))]
+    return EDGE_TYPES[int(edge_types(f_from, f_to, sense, fitness_tolerance))]
 
 
-def _check_sense_tolerance(sense: str, tolerance: float) -> None:
+def _check_sense_tolerance(sense: str, fitness_tolerance: float) -> None:
     check_choice("sense", sense, ("max", "min"))
-    check_range("tolerance", tolerance, 0.0)
+    check_range("fitness_tolerance", fitness_tolerance, 0.0)
 
 
 def _best(values: np.ndarray, sense: str) -> float | None:
@@ -81,8 +88,9 @@ def _best(values: np.ndarray, sense: str) -> float | None:
 
 
 # ------------------------------------------------------------------------------ LON
+@renamed_keyword("tolerance", "fitness_tolerance")
 def build_lon(
-    trials: pd.DataFrame, sense: str = "max", tolerance: float = 1e-9, full: bool = False
+    trials: pd.DataFrame, sense: str = "max", fitness_tolerance: float = 1e-9, full: bool = False
 ) -> nx.DiGraph:
     """The LON of stored trials (one or more p values and runs).
 
@@ -93,7 +101,7 @@ def build_lon(
     reached by worsening edges. ``graph.graph["run_ends"]`` maps each run (``"<p>:<run>"``)
     to its final incumbent.
     """
-    _check_sense_tolerance(sense, tolerance)
+    _check_sense_tolerance(sense, fitness_tolerance)
     rows = trials.sort_values(["p", "run", "index"], kind="stable")
     if not full:
         rows = rows[rows["accepted"].to_numpy(bool)]
@@ -121,20 +129,21 @@ def build_lon(
     }
     if "label" in rows:  # behaviour labels (lonlib.task.behaviour), where the trials carry them
         nodes["label"] = rows["label"].fillna("").astype(str).to_numpy(object)
-    return _assemble(
+    return assemble_lon(
         names,
         nodes,
         Transitions(source, child, run_keys[child], child),
         {key: names[i] for key, i in last.items()},
         sense,
-        tolerance,
+        fitness_tolerance,
     )
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def lon_from_transitions(
     transitions: pd.DataFrame | Mapping[str, Sequence],
     sense: str = "min",
-    tolerance: float = 1e-9,
+    fitness_tolerance: float = 1e-9,
     max_fitness_spread: float | None = None,
     source: str = "transitions",
 ) -> nx.DiGraph:
@@ -145,14 +154,14 @@ def lon_from_transitions(
     A node seen with several fitness values (a tool re-evaluating an optimum, ~1e-8 apart)
     takes its best one under ``sense``; a :class:`FitnessSpreadWarning` names the largest
     spread, and a ``ValueError`` is raised only when that spread exceeds
-    ``max_fitness_spread`` (None: no bound). ``tolerance`` is the separate equal-edge
+    ``max_fitness_spread`` (None: no bound). ``fitness_tolerance`` is the separate equal-edge
     tolerance, applied to the aggregated values. A row whose two nodes are the same is a
     self-return. A node is ``accepted`` when the search stood on it: it leaves a hop
     (``node1``) or a non-worsening hop reaches it; the ``start`` nodes are the ``node1`` of
     each run's first row, and a run ends at the ``node2`` of its last non-worsening row (at
     its start when it has none). ``source`` names the table in messages.
     """
-    _check_sense_tolerance(sense, tolerance)
+    _check_sense_tolerance(sense, fitness_tolerance)
     if max_fitness_spread is not None:
         check_range("max_fitness_spread", max_fitness_spread, 0.0)
     missing = [c for c in TRANSITION_COLUMNS if c not in transitions]
@@ -166,7 +175,7 @@ def lon_from_transitions(
     fitness = _aggregate_fitness(codes, values, names, sense, max_fitness_spread, source)
     src, dst = codes[0::2], codes[1::2]
     runs = np.array([str(r) for r in transitions["run"]], dtype=object)
-    kind = edge_types(fitness[src], fitness[dst], sense, tolerance)
+    kind = edge_types(fitness[src], fitness[dst], sense, fitness_tolerance)
     accepted = np.zeros(len(names), bool)
     accepted[src] = True
     accepted[dst[kind != WORSENING]] = True
@@ -182,13 +191,13 @@ def lon_from_transitions(
         "accepted": accepted,
     }
     names = list(names)
-    return _assemble(
+    return assemble_lon(
         names,
         nodes,
         Transitions(src, dst, runs, np.arange(m)),
         {run: names[end] for run, end in zip(run_names, ends, strict=True)},
         sense,
-        tolerance,
+        fitness_tolerance,
     )
 
 
@@ -244,13 +253,14 @@ class Transitions:
     order: np.ndarray
 
 
-def _assemble(
+@renamed_keyword("tolerance", "fitness_tolerance")
+def assemble_lon(
     names: list[str],
     nodes: dict[str, np.ndarray],
     hops: Transitions,
     run_ends: dict[str, str],
     sense: str,
-    tolerance: float,
+    fitness_tolerance: float,
 ) -> nx.DiGraph:
     """The LON graph of named nodes and hops: self-returns counted, repeated hops weighted."""
     n = len(names)
@@ -261,7 +271,7 @@ def _assemble(
     key, first, inverse = _unique_pairs(src * n + dst)
     weight = np.bincount(inverse, minlength=key.size)
     src, dst = key // max(n, 1), key % max(n, 1)
-    kind = edge_types(fitness[src], fitness[dst], sense, tolerance)
+    kind = edge_types(fitness[src], fitness[dst], sense, fitness_tolerance)
     accepted = nodes["accepted"]
     monotone = (kind != WORSENING) & accepted[src] & accepted[dst]
     best = _best(fitness[accepted], sense)
@@ -269,7 +279,7 @@ def _assemble(
         "self_returns": self_returns,
         "in_strength": np.bincount(dst, weights=weight, minlength=n).astype(int),
         "sink": accepted & (np.bincount(src[monotone], minlength=n) == 0),
-        "best": np.zeros(n, bool) if best is None else np.abs(fitness - best) <= tolerance,
+        "best": np.zeros(n, bool) if best is None else np.abs(fitness - best) <= fitness_tolerance,
     }
     runs, order = hops.run[~loop][first].tolist(), hops.order[~loop][first].tolist()
     edges = (
@@ -278,7 +288,7 @@ def _assemble(
             src.tolist(), dst.tolist(), kind.tolist(), weight.tolist(), runs, order, strict=True
         )
     )
-    graph = nx.DiGraph(sense=sense, tolerance=float(tolerance), run_ends=run_ends)
+    graph = nx.DiGraph(sense=sense, fitness_tolerance=float(fitness_tolerance), run_ends=run_ends)
     _fill(graph, names, {**nodes, **annotations}, edges)
     return graph
 
@@ -319,7 +329,7 @@ class GraphArrays:
     weight: np.ndarray
     kind: np.ndarray
     sense: str
-    tolerance: float
+    fitness_tolerance: float
 
     @property
     def monotone(self) -> np.ndarray:
@@ -343,12 +353,13 @@ class GraphArrays:
         best = self.best
         if best is None:
             return np.zeros(np.shape(values), bool)
-        return np.abs(np.asarray(values) - best) <= self.tolerance
+        return np.abs(np.asarray(values) - best) <= self.fitness_tolerance
 
 
 def graph_arrays(graph: nx.DiGraph) -> GraphArrays:
     """The arrays view of ``graph`` (edge types recomputed from fitness, sense, tolerance)."""
-    sense, tolerance = graph.graph["sense"], graph.graph["tolerance"]
+    sense = graph.graph["sense"]
+    fitness_tolerance = graph.graph.get("fitness_tolerance", graph.graph.get("tolerance"))
     names = list(graph)
     n = len(names)
     index = dict(zip(names, range(n), strict=True))
@@ -365,9 +376,9 @@ def graph_arrays(graph: nx.DiGraph) -> GraphArrays:
     loop = src == dst
     np.add.at(self_returns, src[loop], weight[loop].astype(int))
     src, dst, weight = src[~loop], dst[~loop], weight[~loop]
-    kind = edge_types(fitness[src], fitness[dst], sense, tolerance)
+    kind = edge_types(fitness[src], fitness[dst], sense, fitness_tolerance)
     return GraphArrays(
-        names, fitness, accepted, self_returns, src, dst, weight, kind, sense, tolerance
+        names, fitness, accepted, self_returns, src, dst, weight, kind, sense, fitness_tolerance
     )
 
 
@@ -444,7 +455,7 @@ def compress(arrays: GraphArrays) -> Compressed:
     best_of = np.maximum if arrays.sense == "max" else np.minimum
     while True:
         a, b = label[src], label[dst]
-        equal = (a != b) & (np.abs(fitness[a] - fitness[b]) <= arrays.tolerance)
+        equal = (a != b) & (np.abs(fitness[a] - fitness[b]) <= arrays.fitness_tolerance)
         if not equal.any():
             break
         k = len(fitness)
@@ -460,7 +471,9 @@ def compress(arrays: GraphArrays) -> Compressed:
     pairs, _, inverse = _unique_pairs(a[between] * k + b[between])
     summed = np.bincount(inverse, weights=weight[between], minlength=pairs.size)
     a, b = pairs // max(k, 1), pairs % max(k, 1)
-    improving = edge_types(fitness[a], fitness[b], arrays.sense, arrays.tolerance) == IMPROVING
+    improving = (
+        edge_types(fitness[a], fitness[b], arrays.sense, arrays.fitness_tolerance) == IMPROVING
+    )
     return Compressed(
         keep,
         label,
@@ -497,7 +510,9 @@ def cmlon(graph: nx.DiGraph) -> nx.DiGraph:
     c = compress(arrays)
     names = c.names
     out = nx.DiGraph(
-        sense=arrays.sense, tolerance=arrays.tolerance, dropped_worsening=c.dropped_worsening
+        sense=arrays.sense,
+        fitness_tolerance=arrays.fitness_tolerance,
+        dropped_worsening=c.dropped_worsening,
     )
     order = np.argsort(c.label, kind="stable")
     groups = (

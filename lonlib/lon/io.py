@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from lonlib.lon.graphs import TRANSITION_COLUMNS, lon_from_transitions
+from lonlib.util.deprecation import renamed_keyword
 
 TRACE_HEADER = TRANSITION_COLUMNS
 
@@ -79,10 +80,11 @@ def _finite_numbers(*texts: str) -> bool:
         return False
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def from_trace(
     path: str | Path,
     sense: str = "min",
-    tolerance: float = 1e-9,
+    fitness_tolerance: float = 1e-9,
     max_fitness_spread: float | None = None,
 ) -> nx.DiGraph:
     """The LON of a trace file sampled by lonlib or another tool (see
@@ -90,12 +92,12 @@ def from_trace(
     run ends are read).
 
     Most LON tools minimise, hence ``sense="min"`` by default; say ``"max"`` for lonlib's
-    own traces. ``tolerance`` is the equal-edge tolerance; ``max_fitness_spread`` the
+    own traces. ``fitness_tolerance`` is the equal-edge tolerance; ``max_fitness_spread`` the
     separate bound on how far a node's repeated fitness values may differ before the file
     is refused (None: never refused, only warned about).
     """
     return lon_from_transitions(
-        _read_columns(Path(path)), sense, tolerance, max_fitness_spread, source=str(path)
+        _read_columns(Path(path)), sense, fitness_tolerance, max_fitness_spread, source=str(path)
     )
 
 

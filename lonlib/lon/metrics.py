@@ -26,6 +26,7 @@ from lonlib.lon.graphs import (
     compress,
     graph_arrays,
 )
+from lonlib.util.deprecation import renamed_keyword
 
 
 @dataclass(frozen=True)
@@ -189,11 +190,12 @@ def funnel_metrics(graph: nx.DiGraph) -> pd.DataFrame:
     )
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def metrics_table(
-    trials: pd.DataFrame, sense: str = "max", tolerance: float = 1e-9
+    trials: pd.DataFrame, sense: str = "max", fitness_tolerance: float = 1e-9
 ) -> pd.DataFrame:
     """:func:`lon_metrics` per perturbation strength, one row per p."""
     rows = []
     for p, group in trials.groupby("p", sort=True):
-        rows.append({"p": p, **lon_metrics(build_lon(group, sense, tolerance))})
+        rows.append({"p": p, **lon_metrics(build_lon(group, sense, fitness_tolerance))})
     return pd.DataFrame(rows)

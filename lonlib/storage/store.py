@@ -35,6 +35,7 @@ import pandas as pd
 
 from lonlib.search.algorithm import BasinHoppingConfig, LocalOptimum, RunState, Trial
 
+Job = tuple[float, int]  # a run of an experiment: (p, run index)
 TRIAL_FIELDS = [f.name for f in dataclasses.fields(Trial) if f.name != "behaviour"]
 TRIAL_COLUMNS = ["p", "run", *TRIAL_FIELDS]  # then the behaviour columns (b_*, label), if any
 

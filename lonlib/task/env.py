@@ -1,16 +1,23 @@
 """Gymnasium facade over :class:`lonlib.task.pendulum.CoupledPendulums` (one environment).
 
-Registered as ``lonlib/CoupledPendulum-v0``; keyword arguments of ``gymnasium.make`` reach
-:class:`~lonlib.task.pendulum.PendulumConfig` (``gymnasium.make("lonlib/CoupledPendulum-v0",
+Registered as ``lonlib/CoupledPendulum-v1``; keyword arguments of ``gymnasium.make`` reach
+:class:`~lonlib.task.pendulum.PendulumConfig` (``gymnasium.make("lonlib/CoupledPendulum-v1",
 n_carts=1, reward="upright")``). Observation: normalised Table I sensors ``Box(0, 1, (10n,))``;
 action: one value per cart ``Box(0, 1, (n,))``; reward: the config's reward; ``terminated`` on
 collision / tether / boundary, ``truncated`` at ``config.steps``. ``info`` holds
 ``end_reason`` (an :class:`~lonlib.task.pendulum.EndReason` name), ``fitness`` (running
 Algorithm 1 fitness) and ``upright`` (this step's fitness increment).
+
+Versions (Gymnasium bumps an id's version when its results change): ``v1`` has the calibrated
+default physics (velocity motor, semi-implicit Euler); ``v0`` was registered before that
+change. ``v0`` stays registered, makes the same environment as ``v1`` and warns
+(``DeprecationWarning``); ask for the physics explicitly (``motor=``, ``integrator=``) to
+rebuild an old one.
 """
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import gymnasium as gym
@@ -18,7 +25,8 @@ import numpy as np
 
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
 
-ENV_ID = "lonlib/CoupledPendulum-v0"
+ENV_ID = "lonlib/CoupledPendulum-v1"
+DEPRECATED_ENV_ID = "lonlib/CoupledPendulum-v0"
 
 
 class CoupledPendulumEnv(gym.Env):
@@ -119,3 +127,23 @@ def _line(
             cols = np.clip(np.round(xs + dx).astype(int), 0, image.shape[1] - 1)
             rows = np.clip(np.round(ys + dy).astype(int), 0, image.shape[0] - 1)
             image[rows, cols] = color
+
+
+def make_deprecated_env(**kwargs: Any) -> CoupledPendulumEnv:
+    """``lonlib/CoupledPendulum-v0``'s entry point: the ``v1`` environment, with a warning."""
+    warnings.warn(
+        f"{DEPRECATED_ENV_ID} is deprecated: it was registered before the default physics "
+        f"changed (velocity motor, semi-implicit Euler) and now makes {ENV_ID}'s environment; "
+        f"use {ENV_ID}",
+        DeprecationWarning,
+        stacklevel=2,
+    )
+    return CoupledPendulumEnv(**kwargs)
+
+
+def register_envs() -> None:
+    """Register ``lonlib/CoupledPendulum-v1`` and the deprecated ``v0`` with Gymnasium (once)."""
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="lonlib.task.env:CoupledPendulumEnv")
+    if DEPRECATED_ENV_ID not in gym.registry:
+        gym.register(id=DEPRECATED_ENV_ID, entry_point="lonlib.task.env:make_deprecated_env")

@@ -13,7 +13,7 @@ holds there by construction. Here a node is a class of optima that *behave* alik
    z-scored (mean and population standard deviation, NaN ignored); a column without spread
    contributes 0; a NaN (the phase of one rod) becomes 0.
 3. **Graph**: two optima are joined when their standardised features lie within
-   ``epsilon`` (Euclidean) *and* their fitness differs by at most ``tolerance`` (plus 1e-9
+   ``epsilon`` (Euclidean) *and* their fitness differs by at most ``fitness_tolerance`` (plus 1e-9
    for float rounding: fitness is a count of steps over the nominal steps). An optimum
    without a descriptor is joined to nothing.
 4. **Nodes**: the connected components of that graph (a transitive closure: a chain of close
@@ -35,6 +35,8 @@ import numpy as np
 import pandas as pd
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+
+from lonlib.util.deprecation import renamed_keyword
 
 PREFIX = "b_"
 FITNESS_SLACK = 1e-9
@@ -75,17 +77,22 @@ def standardise(features: pd.DataFrame) -> np.ndarray:
     return z
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def cluster(
-    points: np.ndarray, fitness: np.ndarray, described: np.ndarray, epsilon: float, tolerance: float
+    points: np.ndarray,
+    fitness: np.ndarray,
+    described: np.ndarray,
+    epsilon: float,
+    fitness_tolerance: float,
 ) -> np.ndarray:
     """Node number of each row: connected components of the graph that joins two described
-    rows within ``epsilon`` (Euclidean over ``points``) and ``tolerance`` (fitness).
+    rows within ``epsilon`` (Euclidean over ``points``) and ``fitness_tolerance`` (fitness).
     Numbered by first member, so the result does not depend on the component algorithm."""
     n = len(fitness)
     if n == 0:
         return np.zeros(0, int)
     distance = np.sqrt(((points[:, None, :] - points[None, :, :]) ** 2).sum(axis=-1))
-    close = np.abs(fitness[:, None] - fitness[None, :]) <= tolerance + FITNESS_SLACK
+    close = np.abs(fitness[:, None] - fitness[None, :]) <= fitness_tolerance + FITNESS_SLACK
     joined = (distance <= epsilon) & close & described[:, None] & described[None, :]
     rows, cols = np.nonzero(np.triu(joined, k=1))
     graph = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n))
@@ -105,7 +112,7 @@ class BehaviourNodes:
     ``node`` gives each optimum's node (in the order of the accepted trials)."""
 
     epsilon: float
-    tolerance: float
+    fitness_tolerance: float
     optima: int
     described: int
     features: tuple[str, ...]
@@ -139,8 +146,9 @@ def transitions(optima: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     return source, child
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def behaviour_nodes(
-    trials: pd.DataFrame, features: Sequence[str], epsilon: float, tolerance: float
+    trials: pd.DataFrame, features: Sequence[str], epsilon: float, fitness_tolerance: float
 ) -> BehaviourNodes:
     """Behaviour nodes of the accepted optima of ``trials`` (one p; see the module
     docstring) and their in-edges."""
@@ -151,7 +159,7 @@ def behaviour_nodes(
     full = np.zeros((len(optima), raw.shape[1]))
     full[described] = points
     fitness = optima["fitness"].to_numpy(float)
-    node = cluster(full, fitness, described, epsilon, tolerance)
+    node = cluster(full, fitness, described, epsilon, fitness_tolerance)
     source, target = transitions(optima)
     a, b = node[source], node[target]
     between = a != b
@@ -159,7 +167,7 @@ def behaviour_nodes(
     sources_per_node = np.bincount(pairs[:, 1], minlength=node.max(initial=-1) + 1)
     return BehaviourNodes(
         epsilon=float(epsilon),
-        tolerance=float(tolerance),
+        fitness_tolerance=float(fitness_tolerance),
         optima=len(optima),
         described=int(described.sum()),
         features=tuple(raw.columns),
@@ -172,22 +180,26 @@ def behaviour_nodes(
     )
 
 
+@renamed_keyword("tolerance", "fitness_tolerance")
 def behaviour_node_curve(
-    trials: pd.DataFrame, features: Sequence[str], epsilons: Sequence[float], tolerance: float
+    trials: pd.DataFrame,
+    features: Sequence[str],
+    epsilons: Sequence[float],
+    fitness_tolerance: float,
 ) -> pd.DataFrame:
     """Per p and ``epsilon``: optima, nodes, edges, self-returns, multi-inward nodes and
     their share (one row each; empty when no trial carries a descriptor)."""
     rows = []
     for p, group in trials.groupby("p", sort=True):
         for epsilon in epsilons:
-            result = behaviour_nodes(group, features, epsilon, tolerance)
+            result = behaviour_nodes(group, features, epsilon, fitness_tolerance)
             if not result.described:
                 continue
             rows.append(
                 {
                     "p": float(p),
                     "epsilon": float(epsilon),
-                    "tolerance": float(tolerance),
+                    "fitness_tolerance": float(fitness_tolerance),
                     "optima": result.optima,
                     "nodes": result.nodes,
                     "edges": result.edges,
@@ -201,7 +213,7 @@ def behaviour_node_curve(
         columns=[
             "p",
             "epsilon",
-            "tolerance",
+            "fitness_tolerance",
             "optima",
             "nodes",
             "edges",
