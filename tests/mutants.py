@@ -299,8 +299,8 @@ MUTANTS = [
     # --- Algorithm 2
     Mutant(
         BH,
-        "optimum.fitness >= state.incumbent.fitness",
-        "optimum.fitness > state.incumbent.fitness",
+        "return f_new >= f_best",
+        "return f_new > f_best",
         "equal fitness rejected",
     ),
     Mutant(
@@ -329,8 +329,8 @@ MUTANTS = [
     ),
     Mutant(
         BH,
-        "omega = perturb(state.incumbent.omega, self.config.perturbation, rng)",
-        "omega = state.incumbent.omega",
+        "return perturb(theta, strength, rng), perturb(omega, strength, rng)",
+        "return perturb(theta, strength, rng), omega",
         "critic not perturbed",
     ),
     Mutant(

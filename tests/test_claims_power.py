@@ -7,6 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from lonlib.analysis import claims_power
 from lonlib.analysis.claims_power import (
     AGENT_STEPS_PER_CORE_SECOND,
     ENV_STEPS_PER_RUN,
@@ -20,7 +21,6 @@ from lonlib.analysis.claims_power import (
     runs_smaller_p_better,
     units_needed,
 )
-from lonlib.analysis import claims_power
 
 
 def test_the_table_has_a_row_per_claim_and_is_deterministic():

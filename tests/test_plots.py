@@ -103,7 +103,8 @@ def test_claim_d_curve_has_a_line_per_p_and_marks_the_preregistered_epsilon():
 
 
 def test_figures_colour_and_stack_by_behaviour_label():
-    from lonlib.analysis.pipeline import optima_to_record
+    from lonlib.analysis.pipeline import optima_to_record, slug
+    from lonlib.analysis.recordings import recording_name
     from lonlib.analysis.plots import label_colour, lon_3d_interactive
     from tests.test_behaviour import labelled_trials
 
@@ -122,5 +123,11 @@ def test_figures_colour_and_stack_by_behaviour_label():
     assert legend[:4] == ["balancing", "spinning (in phase)", "spinning", "swinging high"]
     chosen = optima_to_record(table)
     assert set(chosen["behaviour"]) == set(accepted["label"])  # the best of every label
-    assert {"best", "best-spinning", "best-swinging-high"} <= set(chosen["role"])
-    assert "best-spinning-in-phase" in set(chosen["role"])  # file-name safe, no parentheses
+    assert {"best", "label-best"} <= set(chosen["role"])
+    names = {
+        recording_name(r.p, r.run, r.fitness, role=r.role, behaviour=slug(r.behaviour))
+        for r in chosen.itertuples()
+    }
+    # one scheme: <role>_<behaviour>_optimum_..., file-name safe (no parentheses)
+    assert any(n.startswith("label-best_spinning-in-phase_optimum_p=") for n in names)
+    assert any(n.startswith("label-best_swinging-high_optimum_p=") for n in names)

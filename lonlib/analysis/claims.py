@@ -571,7 +571,7 @@ def claim_sparse(land: Landscape) -> Claim:
     p_value = float(stats.binomtest(crowded, nodes, SPARSE_MAX_SHARE, "greater").pvalue)
     evidence = (
         f"at epsilon {result.epsilon:g} over {len(result.features)} standardised features "
-        f"and fitness within {result.tolerance:g}: {result.optima} accepted optima "
+        f"and fitness within {result.fitness_tolerance:g}: {result.optima} accepted optima "
         f"({result.described} described) form {nodes} behaviour nodes; of "
         f"{result.transitions} accepted transitions {result.self_returns} stay inside a "
         f"node, the rest are {result.edges} edges; {crowded} nodes are entered from more "

@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import errno
 import logging
-import time
 import warnings
 from functools import partial
 from pathlib import Path
@@ -100,13 +99,8 @@ def run_one(
 
 def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
     driver = open_run(out, config, p, run)
-    search = ddpg_local_search(config.env, config.ddpg)
-    while not driver.finished:
-        request = driver.next_search()
-        start = time.perf_counter()
-        optimum = search(request.theta, request.omega, request.seed)
-        driver.record(request, optimum, time.perf_counter() - start)
-        save_step(out, p, run, driver.state.trials, optimum)
+    for state, _, optimum in driver.steps(ddpg_local_search(config.env, config.ddpg)):
+        save_step(out, p, run, state.trials, optimum)
     return run_summary(p, run, driver.state)
 
 

@@ -1,8 +1,11 @@
 """Parameter-level basin hopping (paper Algorithm 2) with a pluggable local search.
 
 Like :func:`scipy.optimize.basinhopping`, the global search only perturbs and accepts; the
-local search is any callable ``F(theta, omega, seed) -> LocalOptimum`` (by default DDPG via
-:func:`ddpg_local_search`, a fast deterministic stand-in in the tests). Algorithm 2 as
+local search is any callable ``F(theta, omega, seed) -> LocalOptimum`` (DDPG via
+:func:`lonlib.ddpg.search_interface.ddpg_local_search`, a fast deterministic stand-in in the
+tests), and like it the step and the acceptance are pluggable too (``take_step``,
+``accept_test``; the defaults are the paper's: :func:`perturb_parameters`,
+:func:`non_deteriorating`). Algorithm 2 as
 written: start from random parameters, run ``F``; then repeatedly add U[-p, p] to **every**
 Actor and Critic parameter of the incumbent, run ``F`` again and accept when ``f >= f*``
 (equal fitness is accepted); the failure counter resets on acceptance and the run ends after
@@ -117,6 +120,28 @@ def perturb(values: np.ndarray, strength: float, rng: np.random.Generator) -> np
     return (values.astype(np.float64) + noise).astype(np.float32)
 
 
+TakeStep = Callable[
+    [np.ndarray, np.ndarray, float, np.random.Generator], tuple[np.ndarray, np.ndarray]
+]
+"""``take_step(theta, omega, p, rng) -> (theta', omega')``: the start of the next local search
+from the incumbent's parameters, drawing from the trial's perturbation stream ``rng``."""
+
+AcceptTest = Callable[[float, float], bool]
+"""``accept_test(f_new, f_best) -> bool``: does the new optimum replace the incumbent?"""
+
+
+def perturb_parameters(
+    theta: np.ndarray, omega: np.ndarray, strength: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Algorithm 2's step: U[-p, p] on every Actor parameter, then on every Critic one."""
+    return perturb(theta, strength, rng), perturb(omega, strength, rng)
+
+
+def non_deteriorating(f_new: float, f_best: float) -> bool:
+    """Algorithm 2's acceptance: ``f >= f*`` (equal fitness is accepted)."""
+    return f_new >= f_best
+
+
 @dataclass(frozen=True)
 class TrialSeeds:
     """Independent random streams of one trial, spawned from ``(run seed, trial index)``:
@@ -156,6 +181,9 @@ class BasinHoppingRun:
     The perturbation of trial ``i`` and the local search's seed are independent streams
     derived only from ``(run_seed, i)`` (:func:`trial_seeds`), so a run resumed from a stored
     ``state``, or driven by any executor, continues exactly as an uninterrupted one would.
+    :meth:`steps` is the whole loop with a local search the run calls itself. ``take_step``
+    and ``accept_test`` replace Algorithm 2's perturbation and acceptance (scipy's
+    ``basinhopping`` has the same two hooks); their defaults are the paper's.
     """
 
     def __init__(
@@ -164,8 +192,11 @@ class BasinHoppingRun:
         config: BasinHoppingConfig,
         run_seed: int,
         state: RunState | None = None,
+        take_step: TakeStep = perturb_parameters,
+        accept_test: AcceptTest = non_deteriorating,
     ) -> None:
         self.initial, self.config, self.run_seed = initial, config, run_seed
+        self.take_step, self.accept_test = take_step, accept_test
         self.state = state or RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
 
     @property
@@ -185,17 +216,21 @@ class BasinHoppingRun:
             theta, omega, parent = self.initial[0], self.initial[1], -1
         else:
             rng = np.random.default_rng(seeds.perturbation)
-            theta = perturb(state.incumbent.theta, self.config.perturbation, rng)
-            omega = perturb(state.incumbent.omega, self.config.perturbation, rng)
+            theta, omega = self.take_step(
+                state.incumbent.theta, state.incumbent.omega, self.config.perturbation, rng
+            )
             parent = state.incumbent_index
         return SearchRequest(index, parent, theta, omega, seeds.local_search)
 
     def record(self, request: SearchRequest, optimum: LocalOptimum, seconds: float) -> Trial:
-        """Accept (``f >= f*``) or reject the optimum of ``request`` and return its trial."""
+        """Accept (``accept_test``, by default ``f >= f*``) or reject the optimum of ``request``
+        and return its trial."""
         state = self.state
         if request.index != len(state.trials):
             raise ValueError(f"trial {request.index} recorded, trial {len(state.trials)} due")
-        accepted = state.incumbent is None or optimum.fitness >= state.incumbent.fitness
+        accepted = state.incumbent is None or bool(
+            self.accept_test(optimum.fitness, state.incumbent.fitness)
+        )
         trial = Trial(
             index=request.index,
             parent=request.parent,
@@ -211,6 +246,17 @@ class BasinHoppingRun:
         state.record(trial, optimum, self.config)
         return trial
 
+    def steps(self, local_search: LocalSearch) -> Iterator[tuple[RunState, Trial, LocalOptimum]]:
+        """Algorithm 2's loop from where the run stands: one local search at a time (timed),
+        yielding the state, the trial and the optimum after each so that the caller stores
+        it before the next; ends with the run (T failures in a row, or the budget)."""
+        while not self.finished:
+            request = self.next_search()
+            start = time.perf_counter()
+            optimum = local_search(request.theta, request.omega, request.seed)
+            trial = self.record(request, optimum, time.perf_counter() - start)
+            yield self.state, trial, optimum
+
 
 def basin_hopping_steps(
     local_search: LocalSearch,
@@ -218,19 +264,16 @@ def basin_hopping_steps(
     config: BasinHoppingConfig,
     run_seed: int,
     state: RunState | None = None,
+    take_step: TakeStep = perturb_parameters,
+    accept_test: AcceptTest = non_deteriorating,
 ) -> Iterator[tuple[RunState, Trial, LocalOptimum]]:
     """Run Algorithm 2 one local search at a time, yielding after each.
 
     ``initial`` holds the random starting Actor and Critic; see :class:`BasinHoppingRun`.
     The caller stores each yielded trial before asking for the next.
     """
-    run = BasinHoppingRun(initial, config, run_seed, state)
-    while not run.finished:
-        request = run.next_search()
-        start = time.perf_counter()
-        optimum = local_search(request.theta, request.omega, request.seed)
-        trial = run.record(request, optimum, time.perf_counter() - start)
-        yield run.state, trial, optimum
+    run = BasinHoppingRun(initial, config, run_seed, state, take_step, accept_test)
+    yield from run.steps(local_search)
 
 
 def basin_hopping(
@@ -238,7 +281,12 @@ def basin_hopping(
     initial: tuple[np.ndarray, np.ndarray],
     config: BasinHoppingConfig,
     run_seed: int,
+    take_step: TakeStep = perturb_parameters,
+    accept_test: AcceptTest = non_deteriorating,
 ) -> RunState:
     """Run Algorithm 2 to its end and return the finished state (all trials, the best)."""
-    *_, (state, _, _) = basin_hopping_steps(local_search, initial, config, run_seed)
+    steps = basin_hopping_steps(
+        local_search, initial, config, run_seed, None, take_step, accept_test
+    )
+    *_, (state, _, _) = steps
     return state

@@ -24,8 +24,11 @@ from lonlib.task.controllers import (
     zero_controller,
 )
 from lonlib.task.env import (
+    DEPRECATED_ENV_ID,
     ENV_ID,
     CoupledPendulumEnv,
+    make_deprecated_env,
+    register_envs,
     render_frame,
 )
 from lonlib.task.pendulum import (
@@ -72,6 +75,7 @@ __all__ = [
     "BehaviourThresholds",
     "CoupledPendulumEnv",
     "CoupledPendulums",
+    "DEPRECATED_ENV_ID",
     "DecodedSensors",
     "ENV_ID",
     "ESTIMATES",
@@ -107,9 +111,11 @@ __all__ = [
     "evaluate",
     "forward_numpy",
     "label",
+    "make_deprecated_env",
     "motor_command",
     "nominal_offsets",
     "perturbed_offsets",
+    "register_envs",
     "relabel",
     "render_frame",
     "run_actors",

@@ -13,6 +13,9 @@ from lonlib.util.cpu_kernels import (
     torch_cpu_capability,
     unpinned_message,
 )
+from lonlib.util.deprecation import (
+    renamed_keyword,
+)
 from lonlib.util.messages import (
     show_lonlib_messages,
 )
@@ -22,7 +25,6 @@ from lonlib.util.paths import (
 )
 from lonlib.util.plain_data import (
     StateLayoutError,
-    T,
     config_from_plain,
     generator_from_state,
     generator_state,
@@ -64,7 +66,6 @@ __all__ = [
     "CpuKernelWarning",
     "PINNED_CAPABILITY",
     "StateLayoutError",
-    "T",
     "check_choice",
     "check_field_types",
     "check_keys",
@@ -92,6 +93,7 @@ __all__ = [
     "project_path",
     "project_root",
     "read_yaml_mapping",
+    "renamed_keyword",
     "short_repr",
     "show_lonlib_messages",
     "sigmoid",

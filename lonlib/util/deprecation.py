@@ -7,15 +7,15 @@ import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-F = TypeVar("F", bound=Callable[..., Any])
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
-def renamed_keyword(old: str, new: str) -> Callable[[F], F]:
+def renamed_keyword(old: str, new: str) -> Callable[[_F], _F]:
     """Accept the keyword argument ``old`` as ``new`` (warning once per call site): e.g. the
     LON's fitness equality, ``tolerance`` before it became ``fitness_tolerance`` (the word
     tolerance is Algorithm 2's T alone)."""
 
-    def decorate(function: F) -> F:
+    def decorate(function: _F) -> _F:
         @functools.wraps(function)
         def wrapper(*args: Any, **kwargs: Any) -> Any:
             if old in kwargs:

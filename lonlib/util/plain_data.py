@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-T = TypeVar("T")
+_T = TypeVar("_T")
 
 
 class StateLayoutError(ValueError):
@@ -87,7 +87,7 @@ def plain_dict(value: Any, name: str, keys: set[str] | frozenset[str]) -> dict[s
     return value
 
 
-def config_from_plain(cls: type[T], value: Any, name: str) -> T:
+def config_from_plain(cls: type[_T], value: Any, name: str) -> _T:
     """The frozen configuration dataclass ``cls`` from its fields as plain data
     (:func:`dataclasses.asdict`), every field present and valid."""
     values = plain_dict(value, name, {f.name for f in dataclasses.fields(cls)})
