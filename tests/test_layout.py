@@ -78,3 +78,33 @@ def test_every_subpackage_re_exports_its_public_names(name):
     assert package.__all__ == sorted(set(package.__all__))
     for exported in package.__all__:
         assert hasattr(package, exported), f"lonlib.{name}.{exported}"
+
+
+CONFIGURATIONS = {
+    "lonlib/task/pendulum.py": "PendulumConfig",
+    "lonlib/task/rollout.py": "Scoring",
+    "lonlib/search/algorithm.py": "BasinHoppingConfig",
+    "lonlib/storage/configs.py": "ExperimentConfig",
+    "lonlib/calibration/study.py": "CalibrationConfig",
+}
+
+
+@pytest.mark.parametrize(
+    "path, name", [*CONFIGURATIONS.items(), ("lonlib/storage/configs.py", "DDPGConfig")]
+)
+def test_every_field_of_a_public_configuration_has_a_docstring(path, name):
+    """CleanRL's ``Args`` habit: a string literal right under every field says what it is."""
+    tree = ast.parse((REPO / path).read_text())
+    (cls,) = [n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == name]
+    body = cls.body
+    undocumented = [
+        node.target.id
+        for node, following in zip(body, [*body[1:], None], strict=True)
+        if isinstance(node, ast.AnnAssign)
+        and not (
+            isinstance(following, ast.Expr)
+            and isinstance(following.value, ast.Constant)
+            and isinstance(following.value.value, str)
+        )
+    ]
+    assert undocumented == []

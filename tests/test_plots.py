@@ -104,8 +104,8 @@ def test_claim_d_curve_has_a_line_per_p_and_marks_the_preregistered_epsilon():
 
 def test_figures_colour_and_stack_by_behaviour_label():
     from lonlib.analysis.pipeline import optima_to_record, slug
-    from lonlib.analysis.recordings import recording_name
     from lonlib.analysis.plots import label_colour, lon_3d_interactive
+    from lonlib.analysis.recordings import recording_name
     from tests.test_behaviour import labelled_trials
 
     table = labelled_trials()

@@ -185,14 +185,23 @@ class CalibrationConfig:
     """
 
     name: str = "default"
+    """Study name: the folder's default name."""
     cells: tuple[Cell, ...] = DEFAULT_CELLS
+    """The grid: one cell per motor, gain or tau, integrator and reward."""
     seeds: int = 3
+    """DDPG searches per cell."""
     seed: int = 0
+    """Study seed: search ``k`` of a cell is seeded from it."""
     max_steps: int = 150_000
+    """Environment steps every search trains (no early stop)."""
     batch_size: int = 256
+    """DDPG minibatch size of every search."""
     env: PendulumConfig = field(default_factory=PendulumConfig)
+    """The physics every cell starts from (cells replace motor, gain, tau, integrator, reward)."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    """The other DDPG hyperparameters."""
     drift_steps: int = 2000
+    """Steps of the motor-off energy-drift check of each integrator."""
 
     def __post_init__(self) -> None:
         check_field_types(self)

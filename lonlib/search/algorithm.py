@@ -30,8 +30,11 @@ class BasinHoppingConfig:
     """Algorithm 2's inputs: perturbation strength ``p``, tolerance ``T``, a budget."""
 
     perturbation: float = 1e-4
+    """``p``: every parameter of the incumbent gets U[-p, p] before a local search."""
     tolerance: int = 5
+    """``T``: the run ends after this many consecutive failures (rejections)."""
     max_local_searches: int = 100
+    """Budget: the run ends after this many local searches in all."""
 
     def __post_init__(self) -> None:
         check_field_types(self)

@@ -83,25 +83,45 @@ class DDPGConfig:
     """
 
     buffer_size: int = 40_000
+    """Replay buffer capacity, transitions (paper: 40 000)."""
     batch_size: int = 2000
+    """Minibatch size, sampled every environment step (paper: 2000)."""
     noise_std: float = 0.1
+    """Standard deviation of the Gaussian action noise (paper: 0.1)."""
     learning_rate: float = 1e-3
+    """Adam's learning rate of Actor and Critic (paper: 0.001)."""
     gamma: float = 0.99
+    """Discount factor (paper: 0.99)."""
     tau: float = 0.005
+    """Soft target-update rate (ours: 0.005)."""
     warmup_steps: int = 2000
+    """Environment steps with random actions before training starts."""
     max_steps: int = 150_000
+    """Budget of one local search, environment steps."""
     min_steps: int = 60_000
+    """A local search never stops for patience before this many steps."""
     patience_steps: int = 40_000
+    """Stop when this many steps bring no new best greedy fitness."""
     eval_seed: int = 0
+    """Random stream of the greedy evaluations' start noise (the same for every policy)."""
     fitness_estimate: str = "nominal"
+    """What a greedy evaluation scores: ``nominal`` (Algorithm 1) or ``robust``."""
     robust_starts: int = 8
+    """Perturbed starts of the ``robust`` estimate (and of the conditioning)."""
     robust_noise: float = 0.01
+    """Half-width of the ``robust`` starts' uniform perturbation."""
     robust_seed: int = 0
+    """Random stream of the ``robust`` starts."""
     plateau_tiebreak: bool = False
+    """On equal greedy fitness, a higher greedy return counts as progress."""
     count_start: bool = False
+    """The start parameters are candidates for the returned optimum."""
     device: str = "cpu"
+    """Where DDPG computes (``cpu``, ``cuda[:i]``); not what it computes."""
     threads: int = 1
+    """torch CPU threads; not what it computes."""
     update: str = "lean"
+    """The learner: ``lean`` (hand-written passes, default) or ``autograd`` (reference)."""
 
     @property
     def scoring(self) -> Scoring:
@@ -153,18 +173,27 @@ class ExperimentConfig:
     """One LON sampling experiment: which p values, how many runs, and every setting."""
 
     name: str = "quick"
+    """Experiment name: letters, digits, '-' or '_' (the folder's default name)."""
     perturbations: tuple[float, ...] = (1e-3, 1e-4)
+    """The perturbation strengths ``p`` sampled, each with ``runs`` runs."""
     runs: int = 4
+    """Independent basin-hopping runs per ``p``."""
     tolerance: int = 2
+    """Algorithm 2's ``T``: consecutive failures that end a run."""
     max_local_searches: int = 6
+    """Local searches a run may take at most (so that every run ends)."""
     seed: int = 2024
+    """Experiment seed: run ``(p, i)`` is seeded from ``(seed, p, i)``."""
     env: PendulumConfig = field(default_factory=PendulumConfig)
+    """The task's physics and fitness (the paper's ``e``)."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    """DDPG's hyperparameters (the paper's ``h``)."""
     note: str = ""
-    executor: str = (
-        "auto"  # where runs execute (lonlib.experiment.executors.EXECUTORS); not results
-    )
-    slots: int = 16  # local searches per batch of the lockstep executor
+    """Free text stored with the experiment (e.g. why its budget is small)."""
+    executor: str = "auto"
+    """Where runs execute (:data:`lonlib.experiment.executors.EXECUTORS`); not what they compute."""
+    slots: int = 16
+    """Local searches trained as one batch by the lockstep executor; not results."""
 
     def __post_init__(self) -> None:
         check_field_types(self)

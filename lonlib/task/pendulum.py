@@ -169,32 +169,61 @@ class PendulumConfig:
     """
 
     n_carts: int = 2
+    """Carts on the track, 1 to 5 (the paper studies 1 and 2)."""
     gravity: float = 9.8
+    """Gravitational acceleration, m/s^2 (classic cart-pole)."""
     cart_mass: float = 1.0
+    """Mass of each cart, kg."""
     pole_mass: float = 0.1
+    """Mass of each (uniform) rod, kg."""
     pole_half_length: float = 0.5
+    """Half the length of each rod, m."""
     cart_friction: float = 0.0005
+    """Friction coefficient between a cart and the track."""
     hinge_friction: float = 0.000002
+    """Friction coefficient of each rod's hinge."""
     dt: float = 0.02
+    """Seconds per control step (one action, one sensor reading)."""
     substeps: int = 1
+    """Integration steps per control step (each ``dt / substeps`` s)."""
     integrator: str = "semi-implicit"
+    """``semi-implicit`` (symplectic) Euler, the default, or explicit ``euler``."""
     motor: str = "velocity"
+    """How an action moves a cart: ``velocity`` (a target speed reached with lag ``motor_tau``,
+    the default), ``force`` or ``acceleration``."""
     motor_gain: float = 1.0
+    """Scale of the motor command ``u`` in [-2, 2]: N, m/s^2 or m/s per unit."""
     motor_tau: float = 0.02
+    """Time constant of the velocity motor's first-order lag, s."""
     cart_width: float = 0.2
+    """Cart width, m: carts whose centres are closer than this collide."""
     tether_length: float = 2.0
+    """Tether between neighbouring carts, m: farther apart, the chain breaks."""
     initial_spacing: float = 1.1
+    """Distance between neighbouring carts at the start, m."""
     track_half_length_base: float = 2.4
+    """Half the track length for one cart, m."""
     track_half_length_per_cart: float = 0.55
+    """Half-length added per further cart, m."""
     velocity_range: float = 2.0
+    """Cart speed at which the velocity sensors (S6/S7) saturate, m/s (paper: 2)."""
     angular_velocity_range: float = 5.0 * math.pi
+    """Rod angular speed at which S8/S9 saturate, rad/s (paper: 5 pi)."""
     steps: int = 2000
+    """Control steps of an episode (experiments: 2000; at most 3000)."""
     upright_angle: float = math.pi / 2
+    """A rod counts as upright within this angle of the top, rad."""
     fitness_mode: str = "all"
+    """Algorithm 1's fitness: ``all`` (steps with every rod upright, the paper's
+    text) or ``mean`` (the mean over rods, its formula)."""
     reward: str = "height"
+    """DDPG's reward per step: ``height``, ``slow-height`` or ``upright``; never the fitness."""
     termination_penalty: float = -5.0
+    """Reward added on the step that ends an episode early (crash, tether, wall)."""
     initial_noise: float = 0.0
+    """Half-width of the uniform noise on the start state (0: the nominal start)."""
     initial_angle: float = math.pi
+    """Rod angle at the start, rad (pi: hanging down)."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
