@@ -40,8 +40,6 @@ from lonlib.experiment.running import (
     warn_about_cpu_kernels,
 )
 from lonlib.experiment.runs import (
-    MANIFEST_LOCK,
-    RUN_LOCK,
     experiment_plan,
     hold_runs,
     initial_parameters,
@@ -52,10 +50,8 @@ from lonlib.experiment.runs import (
 
 __all__ = [
     "CHECKPOINT_SECONDS",
-    "MANIFEST_LOCK",
     "METADATA_KEYS",
     "OnDone",
-    "RUN_LOCK",
     "StoredBatch",
     "Task",
     "check_lockstep",

@@ -13,12 +13,10 @@ import numpy as np
 from lonlib.search.algorithm import BasinHoppingRun, RunState
 from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.inflight import Plan
+from lonlib.storage.layout import MANIFEST_LOCK, RUN_LOCK  # noqa: F401  (MANIFEST_LOCK: re-exported)
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.store import load_run_state, read_manifest, remove_temporary_files, run_dir
 from lonlib.task.policy import actor_spec, critic_spec
-
-RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
-MANIFEST_LOCK = ".manifest.lock"  # in the experiment folder: guards manifest check + update
 
 
 def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np.ndarray, ...]:

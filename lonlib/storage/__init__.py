@@ -1,6 +1,20 @@
 """What an experiment stores and how it is read back (no torch): configurations, the folder
 layout, atomic storage of runs, the manifest, locks, provenance and the result-path version."""
 
+from lonlib.storage.atomic import (
+    TEMPORARY_SUFFIX,
+    CorruptDataError,
+    DataWriteError,
+    MissingExperimentError,
+    atomic_write,
+    check_output_folder,
+    parquet_bytes,
+    read_json,
+    remove_temporary_files,
+    temporary_files,
+    write_error,
+    write_json,
+)
 from lonlib.storage.configs import (
     EXECUTION_ONLY_DDPG_FIELDS,
     EXECUTORS,
@@ -20,7 +34,6 @@ from lonlib.storage.configs import (
 from lonlib.storage.inflight import (
     FORMAT,
     ID,
-    INFLIGHT_FOLDER,
     CheckpointUnreadable,
     InflightCheckpoint,
     OtherSettings,
@@ -32,6 +45,18 @@ from lonlib.storage.inflight import (
     new_id,
     refusal_reason,
     scan_inflight,
+)
+from lonlib.storage.layout import (
+    INFLIGHT_FOLDER,
+    MANIFEST_LOCK,
+    RUN_LOCK,
+    Job,
+    history_path,
+    optimum_path,
+    p_label,
+    read_manifest,
+    run_dir,
+    trials_path,
 )
 from lonlib.storage.lock import (
     LockHeld,
@@ -64,36 +89,17 @@ from lonlib.storage.status import (
     experiment_status,
     run_status,
 )
-from lonlib.storage.store import (
-    TEMPORARY_SUFFIX,
+from lonlib.storage.trials import (
     TRIAL_COLUMNS,
     TRIAL_FIELDS,
-    CorruptDataError,
-    DataWriteError,
-    Job,
-    MissingExperimentError,
-    atomic_write,
-    check_output_folder,
-    history_path,
     load_run_state,
-    optimum_path,
-    p_label,
-    parquet_bytes,
     read_experiment_trials,
     read_finished_trials,
-    read_json,
-    read_manifest,
     read_optimum,
     read_trials,
-    remove_temporary_files,
     replay_trials,
-    run_dir,
     save_step,
-    temporary_files,
     trials_frame,
-    trials_path,
-    write_error,
-    write_json,
 )
 
 __all__ = [
@@ -111,6 +117,7 @@ __all__ = [
     "Job",
     "LEARNERS",
     "LockHeld",
+    "MANIFEST_LOCK",
     "MissingExperimentError",
     "NAMED_CONFIGS",
     "ONE_CART_DDPG",
@@ -123,6 +130,7 @@ __all__ = [
     "REFERENCE_RUNS",
     "REQUIREMENTS",
     "RESULT_PATH_VERSION",
+    "RUN_LOCK",
     "TEMPORARY_SUFFIX",
     "TIMING_COLUMNS",
     "TORCH_DEVICE",

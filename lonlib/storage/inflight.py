@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lonlib.storage.store import Job
+from lonlib.storage.layout import INFLIGHT_FOLDER, Job
 from lonlib.util.plain_data import (
     plain_float,
     plain_int,
@@ -28,7 +28,6 @@ from lonlib.util.plain_data import (
 
 log = logging.getLogger(__name__)
 
-INFLIGHT_FOLDER = ".inflight"
 # The checkpoint layout's version: bump it when SlotTrainer.to_checkpoint's layout changes
 # (tests/test_inflight.py fails until the new layout is written down there).
 FORMAT = 3
