@@ -22,6 +22,7 @@ from lonlib.experiment.executors import (
 )
 from lonlib.experiment.lockstep import (
     CHECKPOINT_SECONDS,
+    LockstepBatch,
     check_lockstep,
     run_lockstep,
 )
@@ -50,6 +51,7 @@ from lonlib.experiment.runs import (
 
 __all__ = [
     "CHECKPOINT_SECONDS",
+    "LockstepBatch",
     "METADATA_KEYS",
     "OnDone",
     "StoredBatch",

@@ -82,6 +82,247 @@ def check_lockstep(hp: DDPGConfig, slots: int) -> None:
     check_batch_size(hp, slots)
 
 
+class LockstepBatch:
+    """The lockstep executor's batch (:func:`run_lockstep`): runs of one experiment whose
+    local searches train as one :class:`~lonlib.ddpg.trainer.SlotTrainer`, each slot refilled
+    with its run's next search as one ends, resumed from and saved to in-flight checkpoints.
+    The arguments are :func:`run_lockstep`'s; :meth:`run` trains until the runs end (or the
+    batch yields)."""
+
+    def __init__(
+        self,
+        out: str | Path,
+        config: Any,
+        jobs: Sequence[Job],
+        on_done: Callable[[dict[str, Any]], None],
+        slots: int,
+        wait: bool = False,
+        on_tick: Callable[[dict[str, Any]], None] | None = None,
+        tick_seconds: float = 5.0,
+        checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
+        should_yield: Callable[[], bool] | None = None,
+    ) -> None:
+        self.config, self.slots, self.wait, self.on_done = config, slots, wait, on_done
+        self.on_tick, self.tick_seconds = on_tick, tick_seconds
+        self.checkpoint_seconds, self.should_yield = checkpoint_seconds, should_yield
+        check_lockstep(config.ddpg, slots)
+        if checkpoint_seconds is not None:
+            check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
+        self.out = Path(out)
+        self.plan = experiment_plan(self.out, config)  # a checkpoint listing other runs is refused
+        self.pending: deque[Job] = deque(jobs)
+        self.active: dict[Job, _Run] = {}
+
+        self.deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
+        self.owner = ExitStack()  # the lock of the batch's checkpoint, held while the batch trains
+
+    def lock_and_open(self, job: Job, block: bool) -> _Run:
+        """Run ``job`` locked, its driver resumed from storage (raises LockHeld)."""
+        p, run = job
+        lock = ExitStack()
+        lock.enter_context(exclusive_lock(run_lock_path(self.out, p, run), wait=block))
+        try:
+            return _Run(p, run, open_run(self.out, self.config, p, run), lock)
+        except BaseException:
+            lock.close()
+            raise
+
+    def open_next(self, block: bool = False) -> _Run | None:
+        """The next pending run that still needs a search, locked; None when none is left.
+        A run another process holds is reported (or, with ``wait``, deferred: waiting for
+        it here would stall every search in flight); ``block`` waits for the first one."""
+        while self.pending:
+            job = self.pending.popleft()
+            try:
+                run = self.lock_and_open(job, block)
+            except LockHeld as held:
+                if self.wait:
+                    self.deferred.append(job)
+                else:
+                    self.on_done({"p": job[0], "run": job[1], "held_by": held.holder})
+                continue
+            if run.driver.finished:
+                run.lock.close()
+                self.on_done(run_summary(run.p, run.run, run.driver.state))
+                continue
+            return run
+        return None
+
+    def ask(self, run: _Run) -> _Run:
+        """Make ``run`` active and ask its driver for its next search."""
+        self.active[run.p, run.run] = run  # first, so that the lock is released if asking fails
+        run.request = run.driver.next_search()
+        return run
+
+    def restore(self) -> tuple[SlotTrainer, Path] | None:
+        """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
+        continue made active (the others go back to the front of ``pending``)."""
+        for checkpoint in inflight_checkpoints(self.out, self.plan):
+            if self.checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(self.pending):
+                continue
+            ours = ExitStack()  # a live batch holds its checkpoint's lock
+            try:
+                ours.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint), wait=False))
+            except LockHeld:
+                continue
+            restored = _restore(checkpoint, self.lock_and_open, self.config, set(self.pending))
+            if restored is None:
+                ours.close()
+                continue
+            self.owner.enter_context(ours)
+            trainer, kept, dropped = restored
+            for run in kept:
+                self.pending.remove((run.p, run.run))
+                self.active[run.p, run.run] = run
+            for job in reversed(dropped):  # they restart from their stored trials, first
+                if job in self.pending:  # (not if it has ended)
+                    self.pending.remove(job)
+                    self.pending.appendleft(job)
+            log.info(
+                "%s: resumed %d searches in flight (%s env steps) from %s%s",
+                self.out,
+                len(kept),
+                f"{sum(int(trainer.steps[s]) for s in range(trainer.slots) if trainer.busy[s]):,}",
+                checkpoint.name,
+                f"; {len(dropped)} whose runs went on since restart" if dropped else "",
+            )
+            return trainer, checkpoint.metadata_path
+        return None
+
+    def refill(self, trainer: SlotTrainer, runs: list[_Run]) -> None:
+        """Start the searches ``runs`` asked for in free slots of ``trainer``."""
+        trainer.start(
+            trainer.free_slots()[: len(runs)],
+            np.stack([r.request.theta for r in runs]),
+            np.stack([r.request.omega for r in runs]),
+            [r.request.seed for r in runs],
+            [(r.p, r.run) for r in runs],
+        )
+
+    def batch(self, block_first: bool) -> None:
+        """Train until the pending runs are done (those held by others are deferred)."""
+        with self.owner:
+            self.train(block_first)
+
+    def write_checkpoint(self, trainer: SlotTrainer, checkpoint: Path | None) -> tuple[Path, bool]:
+        """Write the batch to its in-flight checkpoint (a new one, locked, if it has none):
+        the checkpoint's path (kept for the next write even if this one failed) and whether
+        it was written."""
+        if checkpoint is None:
+            checkpoint = new_checkpoint_path(self.out)
+            self.owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
+        counts = {tag: len(run.driver.state.trials) for tag, run in self.active.items()}
+        try:
+            save_inflight(checkpoint, trainer, counts)
+        except DataWriteError as error:  # a cache: the experiment goes on without it
+            log.warning("in-flight checkpoint not written (%s)", error)
+            return checkpoint, False
+        return checkpoint, True
+
+    def train(self, block_first: bool) -> None:
+        """One batch: restored from a checkpoint or filled anew, trained until its runs end
+        (raises :class:`_Yielded` when asked to yield, its checkpoint written)."""
+        restored = self.restore()
+        if restored is not None:
+            trainer, checkpoint = restored
+            checkpoint_written = time.monotonic()
+            more = []
+            while len(more) < len(trainer.free_slots()) and (run := self.open_next()) is not None:
+                more.append(self.ask(run))
+            if more:
+                self.refill(trainer, more)
+        else:
+            first = []
+            while len(first) < self.slots and (run := self.open_next(block_first and not first)):
+                first.append(self.ask(run))
+            if not first:
+                return
+            trainer = SlotTrainer(
+                np.stack([r.request.theta for r in first]),
+                np.stack([r.request.omega for r in first]),
+                [r.request.seed for r in first],
+                self.config.env,
+                self.config.ddpg,
+                tags=[(r.p, r.run) for r in first],
+            )
+            checkpoint, checkpoint_written = None, time.monotonic()
+        last_tick, steps_at_tick = time.monotonic(), 0
+        steps = 0
+        yielding = self.should_yield is not None and self.checkpoint_seconds is not None
+        while trainer.busy.any():
+            steps += int(trainer.busy.sum())
+            refills: list[_Run] = []
+            ended = trainer.step()
+            for tag, result in ended:
+                run = self.active[tag]
+                optimum = local_optimum(result, self.config.env, self.config.ddpg)
+                run.driver.record(run.request, optimum, result.seconds)
+                save_step(self.out, run.p, run.run, run.driver.state.trials, optimum)
+                if run.driver.finished:
+                    del self.active[tag]
+                    run.lock.close()
+                    self.on_done(run_summary(run.p, run.run, run.driver.state))
+                    run = self.open_next()
+                    if run is None:
+                        continue
+                refills.append(self.ask(run))
+            if refills:
+                self.refill(trainer, refills)
+            elif not self.pending and not trainer.busy.all():
+                trainer.shrink()
+            now = time.monotonic()
+            due = (
+                self.checkpoint_seconds is not None
+                and now - checkpoint_written >= self.checkpoint_seconds
+            )
+            if due and trainer.busy.any():
+                checkpoint, _ = self.write_checkpoint(trainer, checkpoint)
+                checkpoint_written = now
+            if now - last_tick < self.tick_seconds:
+                continue
+            if self.on_tick is not None:
+                rate = (steps - steps_at_tick) / (now - last_tick)
+                self.on_tick(
+                    {
+                        "in_flight": int(trainer.busy.sum()),
+                        "pending": len(self.pending),
+                        "env_steps/s": f"{rate:,.0f}",
+                    }
+                )
+            last_tick, steps_at_tick = now, steps
+            if yielding and trainer.busy.any() and self.should_yield():
+                checkpoint, written = self.write_checkpoint(trainer, checkpoint)
+                if written:
+                    log.info(
+                        "%s: batch of %d searches yielded (checkpoint %s)",
+                        self.out,
+                        int(trainer.busy.sum()),
+                        checkpoint.name,
+                    )
+                    raise _Yielded
+                log.warning("%s: could not yield; its searches continue in this batch", self.out)
+                yielding = False  # without a checkpoint it would lose its searches
+        if checkpoint is not None:
+            remove_inflight(checkpoint)  # every run of the batch has ended
+
+    def run(self) -> bool:
+        """Train until every run has ended: True if the batch yielded first (its checkpoint
+        written), False once its runs have ended."""
+        try:
+            self.batch(block_first=False)
+            # runs another process held: now wait for them, one batch at a time
+            while self.deferred:
+                self.pending.extend(self.deferred)
+                self.deferred.clear()
+                self.batch(block_first=True)
+        except _Yielded:
+            return True
+        finally:
+            for run in self.active.values():
+                run.lock.close()
+        return False
+
+
 def run_lockstep(
     out: str | Path,
     config: Any,
@@ -113,212 +354,18 @@ def run_lockstep(
     a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
     (it keeps the checkpoint's number of slots).
     """
-
-    check_lockstep(config.ddpg, slots)
-    if checkpoint_seconds is not None:
-        check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
-    out = Path(out)
-    plan = experiment_plan(out, config)  # a checkpoint listing other runs is refused
-    pending: deque[Job] = deque(jobs)
-    active: dict[Job, _Run] = {}
-
-    deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
-    owner = ExitStack()  # the lock of the batch's checkpoint, held while the batch trains
-
-    def lock_and_open(job: Job, block: bool) -> _Run:
-        """Run ``job`` locked, its driver resumed from storage (raises LockHeld)."""
-        p, run = job
-        lock = ExitStack()
-        lock.enter_context(exclusive_lock(run_lock_path(out, p, run), wait=block))
-        try:
-            return _Run(p, run, open_run(out, config, p, run), lock)
-        except BaseException:
-            lock.close()
-            raise
-
-    def open_next(block: bool = False) -> _Run | None:
-        """The next pending run that still needs a search, locked; None when none is left.
-        A run another process holds is reported (or, with ``wait``, deferred: waiting for
-        it here would stall every search in flight); ``block`` waits for the first one."""
-        while pending:
-            job = pending.popleft()
-            try:
-                run = lock_and_open(job, block)
-            except LockHeld as held:
-                if wait:
-                    deferred.append(job)
-                else:
-                    on_done({"p": job[0], "run": job[1], "held_by": held.holder})
-                continue
-            if run.driver.finished:
-                run.lock.close()
-                on_done(run_summary(run.p, run.run, run.driver.state))
-                continue
-            return run
-        return None
-
-    def ask(run: _Run) -> _Run:
-        active[run.p, run.run] = run  # first, so that the lock is released if asking fails
-        run.request = run.driver.next_search()
-        return run
-
-    def restore() -> tuple[SlotTrainer, Path] | None:
-        """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
-        continue made active (the others go back to the front of ``pending``)."""
-        for checkpoint in inflight_checkpoints(out, plan):
-            if checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(pending):
-                continue
-            ours = ExitStack()  # a live batch holds its checkpoint's lock
-            try:
-                ours.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint), wait=False))
-            except LockHeld:
-                continue
-            restored = _restore(checkpoint, lock_and_open, config, set(pending))
-            if restored is None:
-                ours.close()
-                continue
-            owner.enter_context(ours)
-            trainer, kept, dropped = restored
-            for run in kept:
-                pending.remove((run.p, run.run))
-                active[run.p, run.run] = run
-            for job in reversed(dropped):  # they restart from their stored trials, first
-                if job in pending:  # (not if it has ended)
-                    pending.remove(job)
-                    pending.appendleft(job)
-            log.info(
-                "%s: resumed %d searches in flight (%s env steps) from %s%s",
-                out,
-                len(kept),
-                f"{sum(int(trainer.steps[s]) for s in range(trainer.slots) if trainer.busy[s]):,}",
-                checkpoint.name,
-                f"; {len(dropped)} whose runs went on since restart" if dropped else "",
-            )
-            return trainer, checkpoint.metadata_path
-        return None
-
-    def refill(trainer: SlotTrainer, runs: list[_Run]) -> None:
-        trainer.start(
-            trainer.free_slots()[: len(runs)],
-            np.stack([r.request.theta for r in runs]),
-            np.stack([r.request.omega for r in runs]),
-            [r.request.seed for r in runs],
-            [(r.p, r.run) for r in runs],
-        )
-
-    def batch(block_first: bool) -> None:
-        """Train until the pending runs are done (those held by others are deferred)."""
-        with owner:
-            train(block_first)
-
-    def write_checkpoint(trainer: SlotTrainer, checkpoint: Path | None) -> tuple[Path, bool]:
-        """Write the batch to its in-flight checkpoint (a new one, locked, if it has none):
-        the checkpoint's path (kept for the next write even if this one failed) and whether
-        it was written."""
-        if checkpoint is None:
-            checkpoint = new_checkpoint_path(out)
-            owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
-        counts = {tag: len(run.driver.state.trials) for tag, run in active.items()}
-        try:
-            save_inflight(checkpoint, trainer, counts)
-        except DataWriteError as error:  # a cache: the experiment goes on without it
-            log.warning("in-flight checkpoint not written (%s)", error)
-            return checkpoint, False
-        return checkpoint, True
-
-    def train(block_first: bool) -> None:
-        restored = restore()
-        if restored is not None:
-            trainer, checkpoint = restored
-            checkpoint_written = time.monotonic()
-            more = []
-            while len(more) < len(trainer.free_slots()) and (run := open_next()) is not None:
-                more.append(ask(run))
-            if more:
-                refill(trainer, more)
-        else:
-            first = []
-            while len(first) < slots and (run := open_next(block_first and not first)):
-                first.append(ask(run))
-            if not first:
-                return
-            trainer = SlotTrainer(
-                np.stack([r.request.theta for r in first]),
-                np.stack([r.request.omega for r in first]),
-                [r.request.seed for r in first],
-                config.env,
-                config.ddpg,
-                tags=[(r.p, r.run) for r in first],
-            )
-            checkpoint, checkpoint_written = None, time.monotonic()
-        last_tick, steps_at_tick = time.monotonic(), 0
-        steps = 0
-        yielding = should_yield is not None and checkpoint_seconds is not None
-        while trainer.busy.any():
-            steps += int(trainer.busy.sum())
-            refills: list[_Run] = []
-            ended = trainer.step()
-            for tag, result in ended:
-                run = active[tag]
-                optimum = local_optimum(result, config.env, config.ddpg)
-                run.driver.record(run.request, optimum, result.seconds)
-                save_step(out, run.p, run.run, run.driver.state.trials, optimum)
-                if run.driver.finished:
-                    del active[tag]
-                    run.lock.close()
-                    on_done(run_summary(run.p, run.run, run.driver.state))
-                    run = open_next()
-                    if run is None:
-                        continue
-                refills.append(ask(run))
-            if refills:
-                refill(trainer, refills)
-            elif not pending and not trainer.busy.all():
-                trainer.shrink()
-            now = time.monotonic()
-            due = checkpoint_seconds is not None and now - checkpoint_written >= checkpoint_seconds
-            if due and trainer.busy.any():
-                checkpoint, _ = write_checkpoint(trainer, checkpoint)
-                checkpoint_written = now
-            if now - last_tick < tick_seconds:
-                continue
-            if on_tick is not None:
-                rate = (steps - steps_at_tick) / (now - last_tick)
-                on_tick(
-                    {
-                        "in_flight": int(trainer.busy.sum()),
-                        "pending": len(pending),
-                        "env_steps/s": f"{rate:,.0f}",
-                    }
-                )
-            last_tick, steps_at_tick = now, steps
-            if yielding and trainer.busy.any() and should_yield():
-                checkpoint, written = write_checkpoint(trainer, checkpoint)
-                if written:
-                    log.info(
-                        "%s: batch of %d searches yielded (checkpoint %s)",
-                        out,
-                        int(trainer.busy.sum()),
-                        checkpoint.name,
-                    )
-                    raise _Yielded
-                log.warning("%s: could not yield; its searches continue in this batch", out)
-                yielding = False  # without a checkpoint it would lose its searches
-        if checkpoint is not None:
-            remove_inflight(checkpoint)  # every run of the batch has ended
-
-    try:
-        batch(block_first=False)
-        while deferred:  # runs another process held: now wait for them, one batch at a time
-            pending.extend(deferred)
-            deferred.clear()
-            batch(block_first=True)
-    except _Yielded:
-        return True
-    finally:
-        for run in active.values():
-            run.lock.close()
-    return False
+    return LockstepBatch(
+        out,
+        config,
+        jobs,
+        on_done,
+        slots,
+        wait,
+        on_tick,
+        tick_seconds,
+        checkpoint_seconds,
+        should_yield,
+    ).run()
 
 
 def _restore(
