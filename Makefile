@@ -194,8 +194,9 @@ reproduce: setup
 docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
-# Analysis only: figures, tables and the claims table from stored runs (lonlib.analysis, the
-# code the analyse_lon notebook runs); refuses a folder without an experiment.
+# Analysis only: figures, tables and the claims table from stored runs
+# (lonlib.analysis.pipeline, the code the analyse_lon notebook runs); refuses a folder
+# without an experiment.
 figures: setup
 	$(BIN)/lonlib analyse $(EXPERIMENT)
 

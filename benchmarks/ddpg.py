@@ -18,10 +18,10 @@ import numpy as np
 import torch
 
 from benchmarks.common import RESULTS, report
-from lonlib.ddpg import DDPGConfig, ReplayBuffer, local_search
-from lonlib.ddpg_update import learner_class
-from lonlib.nets import actor_spec, critic_spec
-from lonlib.pendulum import PendulumConfig
+from lonlib.ddpg.lean import learner_class
+from lonlib.ddpg.trainer import DDPGConfig, ReplayBuffer, local_search
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec, critic_spec
 
 HP = DDPGConfig(warmup_steps=2000, min_steps=0, patience_steps=10**9)
 ENV = PendulumConfig(n_carts=2)

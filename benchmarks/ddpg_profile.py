@@ -21,8 +21,8 @@ import torch
 from torch.profiler import ProfilerActivity, profile
 
 from benchmarks.ddpg import ENV, make_update
-from lonlib.ddpg import DDPGConfig, local_search_batch
-from lonlib.nets import actor_spec, critic_spec
+from lonlib.ddpg.trainer import DDPGConfig, local_search_batch
+from lonlib.task.policy import actor_spec, critic_spec
 
 
 def update_profile(kind: str, batch: int, k: int, updates: int = 30) -> tuple[float, int, dict]:

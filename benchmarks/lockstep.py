@@ -1,7 +1,7 @@
 """Lockstep speed: agent-steps per second of K local searches trained as one batch, the
 quick experiment through the lockstep and pool executors, and projected paper-scale times.
 
-K-scaling runs a :class:`lonlib.ddpg.SlotTrainer` of the paper's networks on two carts
+K-scaling runs a :class:`lonlib.ddpg.trainer.SlotTrainer` of the paper's networks on two carts
 (buffer 40 000, paper DDPG settings) past its warm-up and times whole steps: actions,
 environments, replay writes and samples, one batched update and the greedy evaluations of
 the episodes that end. It runs on the CPU (one torch thread) and, when torch sees one, on
@@ -20,11 +20,11 @@ import numpy as np
 import torch
 
 from benchmarks.common import RESULTS, report
-from lonlib.ddpg import DDPGConfig, SlotTrainer
-from lonlib.experiment import named_config, run_experiment
-from lonlib.nets import actor_spec, critic_spec
-from lonlib.pendulum import PendulumConfig
-from lonlib.store import read_experiment_trials
+from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer
+from lonlib.experiment.running import named_config, run_experiment
+from lonlib.storage.store import read_experiment_trials
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec, critic_spec
 
 ENV = PendulumConfig(n_carts=2)
 KS = tuple(int(k) for k in os.environ.get("BENCH_LOCKSTEP_KS", "1,4,16,64,256").split(","))

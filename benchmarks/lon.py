@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import median_times, report
-from lonlib.lon import cmlon
-from lonlib.lon_io import from_trace
-from lonlib.lon_metrics import funnel_metrics, lon_metrics, node_metrics
+from lonlib.lon.graphs import cmlon
+from lonlib.lon.io import from_trace
+from lonlib.lon.metrics import funnel_metrics, lon_metrics, node_metrics
 
 TARGET_MS = 40.0
 

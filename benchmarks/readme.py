@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from benchmarks.common import RESULTS
-from lonlib.readme_tables import splice as splice_between
+from lonlib.util.readme_tables import splice as splice_between
 
 README = Path(__file__).parents[1] / "docs" / "performance.md"
 BEGIN, END = "<!-- ddpg-speed:begin (python -m benchmarks.readme) -->", "<!-- ddpg-speed:end -->"

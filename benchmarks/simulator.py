@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.common import best_of, report
-from lonlib.nets import actor_spec, forward_numpy
-from lonlib.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.task.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.task.policy import actor_spec, forward_numpy
 
 PROTOTYPE_STEPS_PER_SECOND = 1.5e6  # plain numpy prototype, two carts, B = 2000, one core
 

@@ -1,28 +1,25 @@
 """lonlib: Local Optima Networks of a reinforcement-learning agent's training landscape.
 
-The coupled inverted pendulums task (:mod:`lonlib.pendulum`, :mod:`lonlib.env`), reference
-controllers (:mod:`lonlib.controllers`), DDPG as the local search and parameter-level basin
+The coupled inverted pendulums task (:mod:`lonlib.task.pendulum`, :mod:`lonlib.task.env`), reference
+controllers (:mod:`lonlib.task.controllers`), DDPG as the local search and parameter-level basin
 hopping as the global search, and the LON analysis built on what they sample.
 """
 
 # First, before anything here imports torch: torch's AVX2 CPU kernels on every x86-64 machine
-# (lonlib.cpu_kernels: the same trials bit for bit on any CPU with AVX2).
-from lonlib.cpu_kernels import pin_torch_cpu_kernels as _pin
+# (lonlib.util.cpu_kernels: the same trials bit for bit on any CPU with AVX2).
+from lonlib.util.cpu_kernels import pin_torch_cpu_kernels as _pin
 
 _pin()
 
-import gymnasium as _gym  # noqa: E402
-
-from lonlib.env import ENV_ID  # noqa: E402
-from lonlib.pendulum import CoupledPendulums, EndReason, PendulumConfig  # noqa: E402
-from lonlib.rollout import Rollout, evaluate  # noqa: E402
+from lonlib.task.env import ENV_ID, register_envs  # noqa: E402
+from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig  # noqa: E402
+from lonlib.task.rollout import Rollout, evaluate  # noqa: E402
 
 Evaluation = Rollout  # the name ``evaluate`` returned before the one rollout
 
 __version__ = "0.1.0"
 
-if ENV_ID not in _gym.registry:
-    _gym.register(id=ENV_ID, entry_point="lonlib.env:CoupledPendulumEnv")
+register_envs()
 
 __all__ = [
     "ENV_ID",

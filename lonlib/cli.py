@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import logging
 import os
 import re
 import sys
@@ -13,9 +12,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.executors import EXECUTORS
-from lonlib.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
-from lonlib.validation import check_range
+from lonlib.experiment.executors import EXECUTORS
+from lonlib.storage.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
+from lonlib.util.messages import show_lonlib_messages
+from lonlib.util.validation import check_range
 
 # `lonlib --help`, plain text (no markup: the terminal shows it as it is written).
 DESCRIPTION = """\
@@ -83,7 +83,7 @@ def _check_output_folder(out: Path) -> str:
 
 
 def _run(args: argparse.Namespace) -> None:
-    from lonlib.experiment import load_config, run_experiment
+    from lonlib.experiment.running import load_config, run_experiment
 
     config = load_config(args.config)
     changes: dict = {}
@@ -119,9 +119,9 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     (configuration, executor, slots, device, lockstep batch, output folder, a stored
     experiment's configuration), nothing computed, created or written."""
     from lonlib.ddpg import check_device
-    from lonlib.executors import resolve_executor, session_executor
-    from lonlib.lockstep import check_lockstep
-    from lonlib.manifest import manifest_path, updated_manifest
+    from lonlib.experiment.executors import resolve_executor, session_executor
+    from lonlib.experiment.lockstep import check_lockstep
+    from lonlib.storage.manifest import manifest_path, updated_manifest
 
     check_range("workers", args.workers, 1, 4096)
     kind = resolve_executor(
@@ -156,14 +156,14 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
 
 def _dry_run_reader(verb: str, root: Path) -> None:
     """``--dry-run`` of a verb that reads an experiment: the folder holds one."""
-    from lonlib.store import read_manifest
+    from lonlib.storage.store import read_manifest
 
     name = read_manifest(root).get("config", {}).get("name", "?")
     print(f"dry run: lonlib {verb} would read the experiment {name!r} in {root}. Nothing done.")
 
 
 def _status(args: argparse.Namespace) -> None:
-    from lonlib.experiment import run_status, status
+    from lonlib.experiment.running import run_status, status
 
     root = experiment_folder(args.dir)
     if args.dry_run:
@@ -175,23 +175,23 @@ def _status(args: argparse.Namespace) -> None:
 
 
 def _lon(args: argparse.Namespace) -> None:
-    from lonlib.lon import build_lon, cmlon
-    from lonlib.lon_io import to_graphml, to_trace
-    from lonlib.lon_metrics import metrics_table
-    from lonlib.store import read_finished_trials
+    from lonlib.lon.graphs import build_lon, cmlon
+    from lonlib.lon.io import to_graphml, to_trace
+    from lonlib.lon.metrics import metrics_table
+    from lonlib.storage.store import read_finished_trials
 
     root = experiment_folder(args.dir)
     if args.dry_run:
         return _dry_run_reader("lon", root)
     trials = read_finished_trials(root)
-    table = metrics_table(trials, "max", args.tolerance)
+    table = metrics_table(trials, "max", args.fitness_tolerance)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     out = Path(args.out) if args.out else root / "lon"
     out.mkdir(parents=True, exist_ok=True)
     table.to_csv(out / "metrics.csv", index=False)
     for p, group in trials.groupby("p"):
-        graph = build_lon(group, "max", args.tolerance, full=args.full)
+        graph = build_lon(group, "max", args.fitness_tolerance, full=args.full)
         stem = f"lon_p={p_label(p)}" + ("_full" if args.full else "")
         to_graphml(graph, out / f"{stem}.graphml")
         to_trace(graph, out / f"{stem}.trace")
@@ -200,9 +200,9 @@ def _lon(args: argparse.Namespace) -> None:
 
 
 def _analyse(args: argparse.Namespace) -> None:
-    from lonlib.analysis import analyse
-    from lonlib.claims_report import claims_markdown, splice_readme
-    from lonlib.summary import splice_summary, summary_markdown
+    from lonlib.analysis.claims_report import claims_markdown, splice_readme
+    from lonlib.analysis.pipeline import analyse
+    from lonlib.analysis.summary import splice_summary, summary_markdown
 
     root = experiment_folder(args.dir)
     readme = _markdown_page(args.docs)
@@ -211,7 +211,11 @@ def _analyse(args: argparse.Namespace) -> None:
     if args.dry_run:
         return _dry_run_reader("analyse", root)
     result = analyse(
-        args.dir, seed=args.seed, tolerance=args.tolerance, bins=args.bins, close_figures=True
+        args.dir,
+        seed=args.seed,
+        fitness_tolerance=args.fitness_tolerance,
+        bins=args.bins,
+        close_figures=True,
     )
     verdicts = result.claims[["claim", "verdict", "evidence"]]
     with pd.option_context("display.width", 200, "display.max_colwidth", 120):
@@ -231,7 +235,7 @@ def _analyse(args: argparse.Namespace) -> None:
 
 
 def _record(args: argparse.Namespace) -> None:
-    from lonlib.analysis import record_optima
+    from lonlib.analysis.pipeline import record_optima
 
     root = experiment_folder(args.dir)
     if args.dry_run:
@@ -244,7 +248,7 @@ def _record(args: argparse.Namespace) -> None:
 
 
 def _verify(args: argparse.Namespace) -> None:
-    from lonlib.verify import verify_experiment
+    from lonlib.analysis.verify import verify_experiment
 
     root = experiment_folder(args.dir)
     if args.dry_run:
@@ -263,8 +267,8 @@ def _verify(args: argparse.Namespace) -> None:
 
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import load_calibration, run_calibration, with_overrides
-    from lonlib.calibration_report import calibration_block, readme_markers
-    from lonlib.readme_tables import splice
+    from lonlib.calibration.report import calibration_block, readme_markers
+    from lonlib.util.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
     readme = _markdown_page(args.docs)
@@ -290,6 +294,33 @@ def _calibrate(args: argparse.Namespace) -> None:
         print(result.cells.drop(columns=["seconds"]).to_string(index=False))
         print(result.drift.to_string(index=False))
     print(f"tables and figure written to {args.out}")
+
+
+class DeprecatedFlag(argparse.Action):
+    """An option's old spelling: stores to the new one and says so on stderr."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        """Store ``values`` under the new name and print the new spelling."""
+        print(
+            f"lonlib: {option_string} is deprecated, use --{self.dest.replace('_', '-')}",
+            file=sys.stderr,
+        )
+        setattr(namespace, self.dest, values)
+
+
+def add_fitness_tolerance(parser: argparse.ArgumentParser) -> None:
+    """``--fitness-tolerance``: two fitness values closer than this are equal in the LON (the
+    old spelling ``--tolerance`` still works; tolerance alone is Algorithm 2's T)."""
+    parser.add_argument(
+        "--fitness-tolerance", type=float, default=1e-9, help="fitness equality in the LON"
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        dest="fitness_tolerance",
+        action=DeprecatedFlag,
+        help=argparse.SUPPRESS,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -338,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
     lon = sub.add_parser("lon", help="print LON metrics per p and write exports")
     lon.add_argument("dir")
     lon.add_argument("--full", action="store_true", help="add rejected trials (worsening)")
-    lon.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality tolerance")
+    add_fitness_tolerance(lon)
     lon.add_argument("--out", help="export folder (default DIR/lon)")
     lon.set_defaults(func=_lon)
 
@@ -348,7 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     analysis.add_argument("dir", help="experiment folder, e.g. data/reference")
     analysis.add_argument("--seed", type=int, default=0, help="layout seed of the 3-D LON")
-    analysis.add_argument("--tolerance", type=float, default=1e-9, help="fitness equality")
+    add_fitness_tolerance(analysis)
     analysis.add_argument("--bins", type=int, default=50, help="histogram bins on [0, 1]")
     analysis.add_argument(
         "--docs",
@@ -407,17 +438,6 @@ def build_parser() -> argparse.ArgumentParser:
             "write nothing",
         )
     return parser
-
-
-def show_lonlib_messages() -> None:
-    """Print lonlib's informational messages (a resumed batch, a stale checkpoint) on
-    stderr, once per process."""
-    logger = logging.getLogger("lonlib")
-    if not logger.handlers:
-        handler = logging.StreamHandler()
-        handler.setFormatter(logging.Formatter("lonlib: %(message)s"))
-        logger.addHandler(handler)
-        logger.setLevel(logging.INFO)
 
 
 def main(argv: list[str] | None = None) -> None:

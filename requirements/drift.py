@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from lonlib.provenance import installed_versions, lock_pins
+from lonlib.storage.provenance import installed_versions, lock_pins
 
 NOT_LOCKED = {"torch", "lonlib", "pip"}
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from lonlib.provenance import lock_pins
+from lonlib.storage.provenance import lock_pins
 
 HEADER = """\
 # Conda environment for lonlib (outside users; the Makefile uses python -m venv + pip).

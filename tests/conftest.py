@@ -30,7 +30,7 @@ def write_tiny_yaml(folder: Path, max_steps: int = 150) -> Path:
 @pytest.fixture(scope="session")
 def tiny_experiment(tmp_path_factory):
     """A finished tiny experiment: (config, folder, trials)."""
-    from lonlib.experiment import load_config, run_experiment
+    from lonlib.experiment.running import load_config, run_experiment
 
     folder = tmp_path_factory.mktemp("tiny")
     config = load_config(write_tiny_yaml(folder))

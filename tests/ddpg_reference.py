@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lonlib.ddpg import DDPGConfig, make_learner
-from lonlib.nets import NetSpec
+from lonlib.ddpg.trainer import DDPGConfig, make_learner
+from lonlib.task.policy import NetSpec
 
 
 def _mlp(spec: NetSpec, params: list[torch.Tensor], x: torch.Tensor) -> torch.Tensor:

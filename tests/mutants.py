@@ -34,17 +34,28 @@ class Mutant:
     why: str
 
 
-DDPG, BH, SIM = "lonlib/ddpg.py", "lonlib/basin_hopping.py", "lonlib/pendulum.py"
-LEAN, AUTOGRAD = "lonlib/ddpg_update.py", "lonlib/ddpg_autograd.py"
-REPLAY, STREAMS, LOCKSTEP = "lonlib/replay.py", "lonlib/random_streams.py", "lonlib/lockstep.py"
-ROLLOUT, NETS, PMATH = "lonlib/rollout.py", "lonlib/nets.py", "lonlib/portable_math.py"
-BEHAVIOUR, VERIFY = "lonlib/behaviour.py", "lonlib/verify.py"
+DDPG, BH, SIM = "lonlib/ddpg/trainer.py", "lonlib/search/algorithm.py", "lonlib/task/pendulum.py"
+LEAN, AUTOGRAD = "lonlib/ddpg/lean.py", "lonlib/ddpg/reference.py"
+REPLAY, STREAMS, LOCKSTEP = (
+    "lonlib/ddpg/replay.py",
+    "lonlib/ddpg/streams.py",
+    "lonlib/experiment/lockstep.py",
+)
+ROLLOUT, NETS, PMATH = (
+    "lonlib/task/rollout.py",
+    "lonlib/task/policy.py",
+    "lonlib/util/portable_math.py",
+)
+BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
+CONFIGS, CHECKPOINTS = "lonlib/storage/configs.py", "lonlib/experiment/checkpoints.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     STREAMS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py"],
+    CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
+    CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py", "tests/test_lockstep.py"],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
@@ -210,10 +221,10 @@ MUTANTS = [
         "a slot holding another start than its run asks for is resumed",
     ),
     Mutant(
-        LOCKSTEP,
-        "same = hp == config.ddpg and env_config == config.env",
-        "same = env_config == config.env",
-        "a batch trained with other threads or device is resumed",
+        CHECKPOINTS,
+        'for prefix, ours, theirs in (("", hp, hp_theirs), ("env.", env_config, env_theirs)):',
+        'for prefix, ours, theirs in (("env.", env_config, env_theirs),):',
+        "a batch trained with other DDPG settings (threads, device) is resumed",
     ),
     # --- DDPG: what F returns
     Mutant(
@@ -228,7 +239,7 @@ MUTANTS = [
         "search.result.theta, search.result.omega = theta.copy(), search.omega.copy()",
         "start Critic returned",
     ),
-    Mutant(DDPG, "count_start: bool = False", "count_start: bool = True", "start counted"),
+    Mutant(CONFIGS, "count_start: bool = False", "count_start: bool = True", "start counted"),
     Mutant(
         DDPG,
         "candidate = trained | hp.count_start",
@@ -288,8 +299,8 @@ MUTANTS = [
     # --- Algorithm 2
     Mutant(
         BH,
-        "optimum.fitness >= state.incumbent.fitness",
-        "optimum.fitness > state.incumbent.fitness",
+        "return f_new >= f_best",
+        "return f_new > f_best",
         "equal fitness rejected",
     ),
     Mutant(
@@ -318,8 +329,8 @@ MUTANTS = [
     ),
     Mutant(
         BH,
-        "omega = perturb(state.incumbent.omega, self.config.perturbation, rng)",
-        "omega = state.incumbent.omega",
+        "return perturb(theta, strength, rng), perturb(omega, strength, rng)",
+        "return perturb(theta, strength, rng), omega",
         "critic not perturbed",
     ),
     Mutant(
@@ -426,8 +437,8 @@ MUTANTS = [
     ),
     Mutant(
         SIM,
-        "upright_each = cos > self._cos_upright",
-        "upright_each = cos < self._cos_upright",
+        "upright_each = (cos > self._cos_upright)",
+        "upright_each = (cos < self._cos_upright)",
         "upright test inverted",
     ),
     Mutant(

@@ -3,18 +3,18 @@
 import numpy as np
 import pytest
 
-from lonlib.basin_hopping import (
+from lonlib.ddpg.search_interface import ddpg_local_search
+from lonlib.ddpg.trainer import DDPGConfig
+from lonlib.search.algorithm import (
     BasinHoppingConfig,
     LocalOptimum,
     RunState,
     basin_hopping,
     basin_hopping_steps,
-    ddpg_local_search,
     trial_seeds,
 )
-from lonlib.ddpg import DDPGConfig
-from lonlib.nets import actor_spec, critic_spec
-from lonlib.pendulum import PendulumConfig
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec, critic_spec
 
 START = (np.zeros(6, dtype=np.float32), np.zeros(4, dtype=np.float32))
 
@@ -158,3 +158,26 @@ def test_ddpg_is_the_default_local_search():
     state = basin_hopping(ddpg_local_search(env, hp), start, config, run_seed=0)
     assert 1 < len(state.trials) <= 3
     assert state.incumbent.theta.shape == (actor_spec(1).n_params,)
+
+
+def test_the_step_and_the_acceptance_are_pluggable_like_scipys_basinhopping():
+    search, calls = scripted([0.5, 0.4, 0.2, 0.3])
+    steps = []
+
+    def no_noise(theta, omega, p, rng):
+        steps.append(p)
+        return theta.copy(), omega.copy()
+
+    state = basin_hopping(
+        search,
+        START,
+        BasinHoppingConfig(perturbation=0.25, tolerance=2, max_local_searches=4),
+        run_seed=0,
+        take_step=no_noise,
+        accept_test=lambda f_new, f_best: f_new >= f_best - 0.15,  # a little worse is fine
+    )
+    assert [t.accepted for t in state.trials] == [True, True, False, True]
+    assert steps == [0.25, 0.25, 0.25] and state.end_reason == "budget"
+    # no noise: each start is exactly the incumbent's parameters (trial i returns input + i+1)
+    np.testing.assert_array_equal(calls[1][0], START[0] + 1)
+    np.testing.assert_array_equal(calls[3][0], START[0] + 3)

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.behaviour import (
+from lonlib.task.behaviour import (
     LABELS,
     BehaviourDescriptor,
     BehaviourThresholds,
@@ -15,10 +15,10 @@ from lonlib.behaviour import (
     label,
     relabel,
 )
-from lonlib.controllers import SwingUpBalanceController, zero_controller
-from lonlib.nets import actor_spec, forward_numpy
-from lonlib.pendulum import PendulumConfig
-from lonlib.rollout import Scoring, evaluate
+from lonlib.task.controllers import SwingUpBalanceController, zero_controller
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec, forward_numpy
+from lonlib.task.rollout import Scoring, evaluate
 
 
 def test_the_swing_up_and_balance_controller_is_labelled_balancing():
@@ -187,9 +187,9 @@ def labelled_trials():
 
 
 def test_behavioural_lon_contracts_same_label_equal_fitness_optima():
-    from lonlib.behaviour_lon import behavioural_lon
-    from lonlib.lon import build_lon
-    from lonlib.lon_metrics import lon_metrics
+    from lonlib.lon.behaviour import behavioural_lon
+    from lonlib.lon.graphs import build_lon
+    from lonlib.lon.metrics import lon_metrics
 
     lon = build_lon(labelled_trials(), full=True)
     assert lon.nodes["p0.0001_r0_t0"]["label"] == "spinning"
@@ -208,7 +208,7 @@ def test_behavioural_lon_contracts_same_label_equal_fitness_optima():
 
 
 def test_behaviour_table_counts_optima_and_sinks_per_label():
-    from lonlib.behaviour_lon import behaviour_table
+    from lonlib.lon.behaviour import behaviour_table
 
     table = behaviour_table(labelled_trials()).set_index("label")
     assert list(table.index) == [

@@ -1,4 +1,4 @@
-"""Claim d's behaviour nodes (lonlib.behaviour_nodes) on hand-built descriptor tables: close
+"""Claim d's behaviour nodes (lonlib.lon.behaviour_space) on hand-built descriptor tables: close
 behaviours with close fitness are one node, far behaviours or far fitness are not, runs
 meeting at a node make it multi-inward, and the standardisation is the documented one."""
 
@@ -6,16 +6,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.behaviour_nodes import (
+from lonlib.analysis.claims import (
+    BEHAVIOUR_NODE_EPSILON,
+    BEHAVIOUR_NODE_FEATURES,
+    BEHAVIOUR_NODE_FITNESS_TOLERANCE,
+)
+from lonlib.lon.behaviour_space import (
     behaviour_features,
     behaviour_node_curve,
     behaviour_nodes,
     standardise,
-)
-from lonlib.claims import (
-    BEHAVIOUR_NODE_EPSILON,
-    BEHAVIOUR_NODE_FEATURES,
-    BEHAVIOUR_NODE_FITNESS_TOLERANCE,
 )
 
 FEATURES = BEHAVIOUR_NODE_FEATURES

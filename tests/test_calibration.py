@@ -7,9 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import lonlib.calibration as calibration
-from lonlib.behaviour import LABELS, describe, label
-from lonlib.calibration import (
+import lonlib.calibration.study as calibration
+from lonlib.calibration.campaign import run_calibration
+from lonlib.calibration.report import search_table
+from lonlib.calibration.study import (
     CELL_COLUMNS,
     CalibrationConfig,
     Cell,
@@ -18,13 +19,12 @@ from lonlib.calibration import (
     integrator_drift,
     load_calibration,
     named_calibration,
-    run_calibration,
 )
-from lonlib.calibration_report import search_table
 from lonlib.cli import main as cli_main
-from lonlib.nets import actor_spec
-from lonlib.pendulum import PendulumConfig
-from lonlib.rollout import Scoring
+from lonlib.task.behaviour import LABELS, describe, label
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec
+from lonlib.task.rollout import Scoring
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +103,7 @@ def test_first_nonzero_step_is_read_from_the_training_history(tiny_study):
 
 
 def test_history_summary_finds_the_first_nonzero_and_the_first_balancing_policy():
-    from lonlib.calibration import BALANCING_FITNESS, history_summary
+    from lonlib.calibration.study import BALANCING_FITNESS, history_summary
 
     steps = [100, 200, 300, 400, 500]
     fitness = [float("nan"), 0.0, 0.3, BALANCING_FITNESS, 0.5]

@@ -1,4 +1,4 @@
-"""The paper's claims on synthetic experiment folders written with lonlib.store: every claim
+"""The paper's claims on synthetic experiment folders written with lonlib.storage.store: every claim
 can come out reproduced, contradicted, inconclusive and not testable, the tests point the
 right way, the table renders, and the analysis-only command leaves the stored runs as they
 were."""
@@ -15,8 +15,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from lonlib.basin_hopping import Trial
-from lonlib.claims import (
+from lonlib.analysis.claims import (
     CONFIDENCE,
     CONTRADICTED,
     INCONCLUSIVE,
@@ -30,14 +29,15 @@ from lonlib.claims import (
     peaks_beside_paper,
     typical_peaks,
 )
-from lonlib.claims_power import power_table
-from lonlib.claims_report import README_BEGIN, README_END, claims_markdown, markdown_table
-from lonlib.effect_size import bootstrap_delta_ci, cliffs_delta, compare_greater
-from lonlib.experiment import ExperimentConfig
-from lonlib.store import read_experiment_trials, save_step, write_json
-from lonlib.summary import README_BEGIN as SUMMARY_BEGIN
-from lonlib.summary import README_END as SUMMARY_END
-from lonlib.summary import experiment_summary, summary_markdown
+from lonlib.analysis.claims_power import power_table
+from lonlib.analysis.claims_report import README_BEGIN, README_END, claims_markdown, markdown_table
+from lonlib.analysis.effect_size import bootstrap_delta_ci, cliffs_delta, compare_greater
+from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
+from lonlib.analysis.summary import README_END as SUMMARY_END
+from lonlib.analysis.summary import experiment_summary, summary_markdown
+from lonlib.experiment.running import ExperimentConfig
+from lonlib.search.algorithm import Trial
+from lonlib.storage.store import read_experiment_trials, save_step, write_json
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -57,7 +57,7 @@ def descriptor(key: int) -> dict:
 
 
 def write_experiment(folder: Path, runs, labels="run", descriptors=None):
-    """An experiment folder as lonlib.store writes it: per p, one run per chain of accepted
+    """An experiment folder as lonlib.storage.store writes it: per p, one run per chain of accepted
     fitness levels after a start at a fitness unique to the run, then two rejected trials.
     ``labels``: ``"run"`` (a behaviour label unique to each run), ``"level"`` (one label per
     fitness level, shared across runs) or None (no label). ``descriptors``: None (no

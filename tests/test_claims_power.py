@@ -1,4 +1,4 @@
-"""The power table (lonlib.claims_power): deterministic, more runs for a smaller effect,
+"""The power table (lonlib.analysis.claims_power): deterministic, more runs for a smaller effect,
 power rising with n, and the cost columns following the documented rates."""
 
 import math
@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib import claims_power
-from lonlib.claims_power import (
+from lonlib.analysis import claims_power
+from lonlib.analysis.claims_power import (
     AGENT_STEPS_PER_CORE_SECOND,
     ENV_STEPS_PER_RUN,
     FLOP_PER_AGENT_STEP,

@@ -17,9 +17,9 @@ import yaml
 from hypothesis import HealthCheck, given, reject, settings
 from hypothesis import strategies as st
 
-from lonlib.ddpg import DDPGConfig
-from lonlib.experiment import ExperimentConfig, load_config
-from lonlib.pendulum import PendulumConfig
+from lonlib.ddpg.trainer import DDPGConfig
+from lonlib.experiment.running import ExperimentConfig, load_config
+from lonlib.task.pendulum import PendulumConfig
 
 SECTIONS = {None: ExperimentConfig, "env": PendulumConfig, "ddpg": DDPGConfig}
 FIELDS = {

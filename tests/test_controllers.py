@@ -5,15 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from lonlib.controllers import SwingUpBalanceController, decode_sensors, zero_controller
-from lonlib.pendulum import (
+from lonlib.task.controllers import SwingUpBalanceController, decode_sensors, zero_controller
+from lonlib.task.pendulum import (
     CoupledPendulums,
     EndReason,
     PendulumConfig,
     sensors,
     wrap_angle,
 )
-from lonlib.rollout import evaluate
+from lonlib.task.rollout import evaluate
 
 
 @pytest.mark.parametrize("n_carts", [1, 2])

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from lonlib.ddpg import (
+from lonlib.ddpg.streams import EXPLORATION_NOISE, CounterStreams
+from lonlib.ddpg.trainer import (
     DDPGConfig,
     ReplayBuffer,
     SlotTrainer,
@@ -16,10 +17,9 @@ from lonlib.ddpg import (
     local_search,
     local_search_batch,
 )
-from lonlib.nets import actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import PendulumConfig, StepResult
-from lonlib.random_streams import EXPLORATION_NOISE, CounterStreams
-from lonlib.rollout import evaluate, score_actors
+from lonlib.task.pendulum import PendulumConfig, StepResult
+from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
+from lonlib.task.rollout import evaluate, score_actors
 from tests.ddpg_reference import lonlib_updates, reference_updates
 
 SMALL = {"batch_size": 64, "buffer_size": 2000, "warmup_steps": 100, "min_steps": 0}
@@ -342,7 +342,7 @@ def test_ddpg_learns_a_task_untrained_policies_cannot_pass():
 
 def test_eight_two_cart_agents_together_equal_each_alone_bit_for_bit():
     # 8 agents x 2 carts: the per-step action and noise arrays are long enough for vector
-    # loops (the SIMD padding of lonlib.random_streams and the act output must hold).
+    # loops (the SIMD padding of lonlib.ddpg.streams and the act output must hold).
     env = PendulumConfig(n_carts=2, steps=60, initial_noise=0.02, upright_angle=2.9)
     hp = DDPGConfig(max_steps=260, patience_steps=10**6, **SMALL)
     thetas, omegas = initial(2, 8, seed=3)

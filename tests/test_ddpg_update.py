@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 import torch
 
-from lonlib.ddpg import DDPGConfig, local_search_batch
-from lonlib.ddpg_autograd import AutogradDDPG
-from lonlib.ddpg_update import LeanDDPG, learner_class
-from lonlib.nets import actor_spec, critic_spec, forward_numpy
-from lonlib.pendulum import PendulumConfig
+from lonlib.ddpg.lean import LeanDDPG, learner_class
+from lonlib.ddpg.reference import AutogradDDPG
+from lonlib.ddpg.trainer import DDPGConfig, local_search_batch
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 
 HP = {"learning_rate": 1e-3, "gamma": 0.99, "tau": 0.005}
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])

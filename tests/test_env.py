@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import lonlib  # noqa: F401  (registers the environment)
-from lonlib.env import ENV_ID
+from lonlib.task.env import ENV_ID
 
 
 @pytest.mark.parametrize("n_carts", [1, 2, 5])
@@ -83,3 +83,11 @@ def test_render_rgb_array_draws_carts_and_rods():
     no_render = gym.make(ENV_ID)
     no_render.reset(seed=0)
     assert no_render.render() is None
+
+
+def test_v0_is_deprecated_and_makes_the_v1_environment():
+    with pytest.warns(DeprecationWarning) as caught:  # ours, and Gymnasium's "out of date"
+        old = gym.make("lonlib/CoupledPendulum-v0", n_carts=1)
+    assert any("use lonlib/CoupledPendulum-v1" in str(w.message) for w in caught)
+    assert ENV_ID == "lonlib/CoupledPendulum-v1"
+    assert old.unwrapped.config == gym.make(ENV_ID, n_carts=1).unwrapped.config

@@ -11,16 +11,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.behaviour import LABELS, describe, descriptors_of
 from lonlib.cli import main as cli_main
-from lonlib.experiment import (
+from lonlib.experiment.running import (
     ExperimentConfig,
     load_config,
     named_config,
     run_experiment,
     status,
 )
-from lonlib.store import (
+from lonlib.storage.store import (
     CorruptDataError,
     history_path,
     optimum_path,
@@ -28,6 +27,7 @@ from lonlib.store import (
     read_trials,
     trials_path,
 )
+from lonlib.task.behaviour import LABELS, describe, descriptors_of
 from tests.conftest import write_tiny_yaml
 
 COMPARED = [
@@ -234,7 +234,7 @@ def test_a_killed_pool_worker_is_retried_and_its_run_resumes(longer_searches, tm
 
 
 def test_a_trials_table_from_an_older_lonlib_is_named_as_such(tmp_path):
-    from lonlib.store import read_trials
+    from lonlib.storage.store import read_trials
 
     old = tmp_path / "trials.parquet"
     columns = ["p", "run", "index", "parent", "fitness", "accepted", "seconds", "env_steps"]

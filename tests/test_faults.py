@@ -23,14 +23,14 @@ import pytest
 import yaml
 
 import lonlib
-from lonlib.experiment import (
+from lonlib.experiment.running import (
     check_worker_sees_folder,
     load_config,
     run_experiment,
     status,
 )
-from lonlib.lock import LockHeld, exclusive_lock
-from lonlib.store import (
+from lonlib.storage.lock import LockHeld, exclusive_lock
+from lonlib.storage.store import (
     CorruptDataError,
     DataWriteError,
     load_run_state,
@@ -208,7 +208,7 @@ def test_missing_or_unusable_output_folder_is_refused_before_any_compute(
     def no_compute(*args, **kwargs):
         raise AssertionError("compute started")
 
-    monkeypatch.setattr("lonlib.experiment.ddpg_local_search", no_compute)
+    monkeypatch.setattr("lonlib.experiment.running.ddpg_local_search", no_compute)
     missing = tmp_path / "not-mounted" / "exp"
     with pytest.raises(DataWriteError, match="not-mounted does not exist") as refused:
         run_experiment(config, missing, progress=False)
@@ -338,7 +338,7 @@ def test_a_second_process_never_writes_a_run_the_first_holds(reference, tmp_path
             except Exception as error:  # surfaced by the assertions below
                 outcome["error"] = error
 
-        caplog.set_level(logging.WARNING, logger="lonlib.experiment")
+        caplog.set_level(logging.WARNING, logger="lonlib.experiment.running")
         thread = threading.Thread(target=b)
         thread.start()
         _wait_for(lambda: "waiting for runs" in caplog.text or not thread.is_alive(), what="B")

@@ -18,9 +18,8 @@ import pytest
 import torch
 
 import lonlib
-from lonlib.ddpg import JUDGE_BATCH, SlotTrainer
-from lonlib.experiment import experiment_plan, run_experiment, run_status
-from lonlib.inflight import (
+from lonlib.ddpg.trainer import JUDGE_BATCH, SlotTrainer
+from lonlib.experiment.checkpoints import (
     FORMAT,
     OtherSettings,
     StoredBatch,
@@ -34,7 +33,8 @@ from lonlib.inflight import (
     save_inflight,
     split_inflight,
 )
-from lonlib.nets import actor_spec, critic_spec
+from lonlib.experiment.running import experiment_plan, run_experiment, run_status
+from lonlib.task.policy import actor_spec, critic_spec
 from tests.test_lockstep import CONFIG, SMALL, killed_after_checkpoints, serial, stored
 
 __all__ = ["serial"]  # the fixture, shared with tests/test_lockstep.py
@@ -146,7 +146,8 @@ def test_a_restored_batch_continues_bit_for_bit(written):
 
 
 # The checkpoint layout of FORMAT 3. Changing what SlotTrainer.to_checkpoint writes means
-# checkpoints of running experiments stop being read: bump lonlib.inflight.FORMAT, then
+# checkpoints of running experiments stop being read: bump lonlib.experiment.checkpoints.FORMAT,
+# then
 # write the new layout here.
 TENSORS = {
     "learner.actor": ("float32", 2),
@@ -228,7 +229,10 @@ def test_the_checkpoint_layout_is_the_one_of_its_format(written):
         METADATA,
         TRAINER,
         SEARCH,
-    ), "the checkpoint layout changed: bump lonlib.inflight.FORMAT and write it down here"
+    ), (
+        "the checkpoint layout changed: bump lonlib.experiment.checkpoints.FORMAT and write it "
+        "down here"
+    )
 
 
 # ------------------------------------------------------------------ hostile files refused
@@ -804,7 +808,7 @@ def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
     """The ranges refused above are the step loop's invariants: every state a batch writes
     (searches starting, in their warm-up, training, ending, slots refilled or freed, the
     start a candidate, ties broken) is read back."""
-    import lonlib.lockstep
+    import lonlib.experiment.lockstep
 
     ddpg = dataclasses.replace(CONFIG.ddpg, count_start=True, plateau_tiebreak=True)
     config = dataclasses.replace(CONFIG, runs=3, max_local_searches=3, ddpg=ddpg)
@@ -818,7 +822,7 @@ def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
         stored = StoredBatch(Path("x.pt"), plain, tensors, 0.0, tuple(runs), tuple(steps))
         read.append(stored.trainer().slots)
 
-    monkeypatch.setattr(lonlib.lockstep, "save_inflight", read_back)
+    monkeypatch.setattr(lonlib.experiment.lockstep, "save_inflight", read_back)
     run_experiment(
         config, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
     )
@@ -969,10 +973,10 @@ def test_a_checkpoint_of_another_format_is_refused_saying_what_to_do(
 
 MOVED = """
 import json, sys
-from lonlib.inflight import inflight_checkpoints, load_inflight
+from lonlib.experiment.checkpoints import inflight_checkpoints, load_inflight
 import lonlib
 assert lonlib.__file__.startswith(sys.argv[2]), lonlib.__file__
-assert "lonlib.ddpg" not in sys.modules and "lonlib.trainers_moved" in sys.modules
+assert "lonlib.ddpg.trainer" not in sys.modules and "lonlib.trainers_moved" in sys.modules
 (checkpoint,) = inflight_checkpoints(sys.argv[1])
 trainer = load_inflight(checkpoint)
 assert type(trainer).__name__ == "RenamedTrainer"
@@ -987,15 +991,15 @@ print(json.dumps(ended))
 
 def test_a_checkpoint_resumes_in_a_package_whose_trainer_moved_and_was_renamed(written, tmp_path):
     """The checkpoint names no module or class: a copy of lonlib with the trainer's module
-    renamed (lonlib.ddpg -> lonlib.trainers_moved) and its class too (SlotTrainer ->
+    renamed (lonlib.ddpg.trainer -> lonlib.trainers_moved) and its class too (SlotTrainer ->
     RenamedTrainer) resumes it, in a process that never imports the original package."""
     checkpoint, uninterrupted, _ = written
     package = Path(lonlib.__file__).parent
     copy = tmp_path / "moved" / "lonlib"
     shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    (copy / "ddpg.py").rename(copy / "trainers_moved.py")
-    for path in copy.glob("*.py"):
-        text = re.sub(r"\blonlib\.ddpg\b", "lonlib.trainers_moved", path.read_text())
+    (copy / "ddpg" / "trainer.py").rename(copy / "trainers_moved.py")
+    for path in copy.rglob("*.py"):
+        text = re.sub(r"\blonlib\.ddpg\.trainer\b", "lonlib.trainers_moved", path.read_text())
         path.write_text(text.replace("SlotTrainer", "RenamedTrainer"))
     script = tmp_path / "resume.py"
     script.write_text(MOVED)

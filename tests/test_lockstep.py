@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.ddpg import DDPGConfig
-from lonlib.experiment import ExperimentConfig, run_experiment, run_one, run_status, status
-from lonlib.pendulum import PendulumConfig
-from lonlib.store import read_experiment_trials
+from lonlib.ddpg.trainer import DDPGConfig
+from lonlib.experiment.running import ExperimentConfig, run_experiment, run_one, run_status, status
+from lonlib.storage.store import read_experiment_trials
+from lonlib.task.pendulum import PendulumConfig
 
 # Searches stop by patience at different times, so slots are refilled while others are in
 # their warm-up or training: a run's trials must still not depend on its neighbours.
@@ -81,10 +81,10 @@ def test_lockstep_trials_equal_the_serial_executors_bit_for_bit(serial, tmp_path
 
 
 def test_a_killed_lockstep_experiment_resumes_to_the_same_trials(serial, tmp_path, monkeypatch):
-    import lonlib.lockstep
+    import lonlib.experiment.lockstep
 
     stored_steps = []
-    save = lonlib.lockstep.save_step
+    save = lonlib.experiment.lockstep.save_step
 
     def save_then_die(*args, **kwargs):
         save(*args, **kwargs)
@@ -92,7 +92,7 @@ def test_a_killed_lockstep_experiment_resumes_to_the_same_trials(serial, tmp_pat
         if len(stored_steps) == 5:
             raise KeyboardInterrupt  # killed with searches of other runs in flight
 
-    monkeypatch.setattr(lonlib.lockstep, "save_step", save_then_die)
+    monkeypatch.setattr(lonlib.experiment.lockstep, "save_step", save_then_die)
     with pytest.raises(KeyboardInterrupt):
         run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=4)
     monkeypatch.undo()
@@ -161,7 +161,7 @@ def test_cli_runs_the_lockstep_executor(tmp_path, capsys):
 
 
 def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, monkeypatch, capfd):
-    from lonlib.inflight import inflight_checkpoints
+    from lonlib.experiment.checkpoints import inflight_checkpoints
 
     # Killed in one process, resumed in two: its checkpoint is split, one part per process.
     killed_after_checkpoints(monkeypatch, tmp_path, CONFIG, slots=4, writes=100)
@@ -176,8 +176,8 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
 
 @pytest.mark.serial  # its processes' timing decides what is in flight when they yield
 def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_path, caplog, capfd):
-    from lonlib.inflight import inflight_checkpoints
-    from lonlib.lockstep_workers import run_lockstep_processes
+    from lonlib.experiment.checkpoints import inflight_checkpoints
+    from lonlib.experiment.lockstep_workers import run_lockstep_processes
 
     # The second process's one run has ended already, so it is idle at once while the first
     # trains a batch of two searches: the first stops after writing its checkpoint, which a
@@ -212,14 +212,14 @@ def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_pat
 def test_a_batch_that_cannot_write_its_checkpoint_keeps_its_searches(
     serial, tmp_path, monkeypatch, caplog
 ):
-    import lonlib.lockstep
-    from lonlib.lockstep import run_lockstep
-    from lonlib.store import DataWriteError
+    import lonlib.experiment.lockstep
+    from lonlib.experiment.lockstep import run_lockstep
+    from lonlib.storage.store import DataWriteError
 
     def disk_full(*_args, **_kwargs):
         raise DataWriteError("no space left on device (test)")
 
-    monkeypatch.setattr(lonlib.lockstep, "save_inflight", disk_full)
+    monkeypatch.setattr(lonlib.experiment.lockstep, "save_inflight", disk_full)
     asked = []
     jobs = [(p, run) for p in CONFIG.perturbations for run in range(CONFIG.runs)]
     summaries = []
@@ -244,9 +244,9 @@ def test_a_batch_that_cannot_write_its_checkpoint_keeps_its_searches(
 def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
     """Run ``config`` into ``folder`` through one lockstep batch of ``slots`` that writes an
     in-flight checkpoint every step and dies right after its ``writes``-th."""
-    import lonlib.lockstep
+    import lonlib.experiment.lockstep
 
-    save = lonlib.lockstep.save_inflight
+    save = lonlib.experiment.lockstep.save_inflight
     calls = []
 
     def save_then_die(*args, **kwargs):
@@ -255,7 +255,7 @@ def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
         if len(calls) == writes:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(lonlib.lockstep, "save_inflight", save_then_die)
+    monkeypatch.setattr(lonlib.experiment.lockstep, "save_inflight", save_then_die)
     with pytest.raises(KeyboardInterrupt):
         run_experiment(
             config, folder, progress=False, executor="lockstep", slots=slots, checkpoint_seconds=0
@@ -266,11 +266,11 @@ def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
 def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
     serial, tmp_path, monkeypatch, caplog
 ):
-    import lonlib.inflight
-    from lonlib.inflight import inflight_checkpoints
+    import lonlib.experiment.checkpoints
+    from lonlib.experiment.checkpoints import inflight_checkpoints
 
     writes = []
-    write = lonlib.inflight.atomic_write
+    write = lonlib.experiment.checkpoints.atomic_write
 
     def die_committing_the_150th(path, data):  # every step writes one: mid-search
         writes.append(path)
@@ -278,7 +278,7 @@ def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
             raise KeyboardInterrupt
         write(path, data)
 
-    monkeypatch.setattr(lonlib.inflight, "atomic_write", die_committing_the_150th)
+    monkeypatch.setattr(lonlib.experiment.checkpoints, "atomic_write", die_committing_the_150th)
     with pytest.raises(KeyboardInterrupt):
         run_experiment(
             CONFIG, tmp_path, progress=False, executor="lockstep", slots=4, checkpoint_seconds=0
@@ -293,7 +293,7 @@ def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
     runs = run_status(tmp_path)
     assert runs["in_flight"].sum() == 4 and set(runs["in_flight_steps"]) <= {0, 149}
     assert read_experiment_trials(tmp_path).empty  # nothing stored: all was in flight
-    with caplog.at_level("INFO", logger="lonlib.lockstep"):
+    with caplog.at_level("INFO", logger="lonlib.experiment.lockstep"):
         run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=4)
     assert "resumed 4 searches in flight (596 env steps)" in caplog.text
     trials, digest = stored(tmp_path)
@@ -315,7 +315,7 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
 ):
     import json
 
-    from lonlib.inflight import inflight_checkpoints, load_inflight, save_inflight
+    from lonlib.experiment.checkpoints import inflight_checkpoints, load_inflight, save_inflight
 
     killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
     (checkpoint,) = inflight_checkpoints(tmp_path)
@@ -338,7 +338,7 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
             trainer.hp = dataclasses.replace(trainer.hp, threads=2)
         counts = dict(zip(checkpoint.runs, checkpoint.trials, strict=True))
         save_inflight(checkpoint.metadata_path, trainer, counts)
-    with caplog.at_level("INFO", logger="lonlib.lockstep"):
+    with caplog.at_level("INFO", logger="lonlib.experiment.lockstep"):
         run_experiment(SMALL, tmp_path, progress=False, executor="lockstep", slots=2)
     log = caplog.text
     if change in ("trials", "start", "ended"):
@@ -357,7 +357,7 @@ def fake_checkpoint(out, runs, trials):
     """Metadata of a checkpoint (no data file): enough for dealing runs and removing it."""
     import json
 
-    from lonlib.inflight import FORMAT
+    from lonlib.experiment.checkpoints import FORMAT
 
     folder = out / ".inflight"
     folder.mkdir(exist_ok=True)
@@ -369,7 +369,7 @@ def fake_checkpoint(out, runs, trials):
 
 
 def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
-    from lonlib.lockstep_workers import split_jobs
+    from lonlib.experiment.lockstep_workers import split_jobs
 
     fake_checkpoint(tmp_path, runs=[[0.001, 3], [0.0001, 0]], trials=[2, 0])
     jobs = [(0.001, run) for run in range(4)] + [(0.0001, run) for run in range(4)]
@@ -383,7 +383,7 @@ def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
 def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
     serial, tmp_path, monkeypatch, caplog
 ):
-    from lonlib.inflight import inflight_checkpoints, split_inflight
+    from lonlib.experiment.checkpoints import inflight_checkpoints, split_inflight
 
     killed_after_checkpoints(monkeypatch, tmp_path, CONFIG, slots=8, writes=120)
     (whole,) = inflight_checkpoints(tmp_path)
@@ -392,7 +392,9 @@ def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
     assert sorted(len(part.runs) for part in parts) == [2, 3, 3]
     assert sorted(run for part in parts for run in part.runs) == sorted(whole.runs)
     assert all(part.steps == (120,) * len(part.runs) for part in parts)
-    with caplog.at_level("INFO", logger="lonlib.lockstep"):  # one process: one part resumed
+    with caplog.at_level(
+        "INFO", logger="lonlib.experiment.lockstep"
+    ):  # one process: one part resumed
         run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=8)
     assert "resumed 3 searches in flight (360 env steps)" in caplog.text
     pd.testing.assert_frame_equal(stored(tmp_path)[0], serial[0])
@@ -400,8 +402,8 @@ def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
 
 
 def test_a_subset_of_a_batch_continues_its_searches_exactly():
-    from lonlib.ddpg import SlotTrainer
-    from lonlib.nets import actor_spec, critic_spec
+    from lonlib.ddpg.trainer import SlotTrainer
+    from lonlib.task.policy import actor_spec, critic_spec
 
     rng = np.random.default_rng(0)
     k = 3
@@ -431,9 +433,9 @@ def test_a_subset_of_a_batch_continues_its_searches_exactly():
 
 
 def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
-    from lonlib.experiment import remove_finished_checkpoints
-    from lonlib.inflight import checkpoint_lock_path, inflight_checkpoints
-    from lonlib.lock import exclusive_lock
+    from lonlib.experiment.checkpoints import checkpoint_lock_path, inflight_checkpoints
+    from lonlib.experiment.running import remove_finished_checkpoints
+    from lonlib.storage.lock import exclusive_lock
 
     folder = fake_checkpoint(tmp_path, runs=[[0.001, 0]], trials=[3])
     (checkpoint,) = inflight_checkpoints(tmp_path)

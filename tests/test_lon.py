@@ -2,10 +2,11 @@
 
 import warnings
 
+import networkx as nx
 import pandas as pd
 import pytest
 
-from lonlib.lon import (
+from lonlib.lon.graphs import (
     FitnessSpreadWarning,
     build_lon,
     cmlon,
@@ -15,7 +16,7 @@ from lonlib.lon import (
     node_id,
     sinks,
 )
-from lonlib.lon_io import from_trace
+from lonlib.lon.io import from_trace
 
 
 def trials(rows, p=1e-4):
@@ -163,8 +164,8 @@ def test_sense_and_tolerance_are_explicit():
     assert minimised.nodes[node_id(1e-4, 2, 0)]["best"]
     with pytest.raises(ValueError, match="sense"):
         build_lon(HAND, sense="up")
-    with pytest.raises(ValueError, match="tolerance"):
-        build_lon(HAND, tolerance=-1.0)
+    with pytest.raises(ValueError, match="fitness_tolerance"):
+        build_lon(HAND, fitness_tolerance=-1.0)
 
 
 # ------------------------------------------------------------------ issue 9, point by point
@@ -206,14 +207,14 @@ def test_a_noisy_node_takes_its_best_value_and_warns_with_the_spread(tmp_path):
         assert from_trace(path, sense="max").nodes["b"]["fitness"] == 3.00000001
     # The equal-edge tolerance is a parameter of its own: b (2.99999998) -> e (3.0).
     with pytest.warns(FitnessSpreadWarning):
-        assert from_trace(path, tolerance=1e-9).edges["b", "e"]["type"] == "worsening"
+        assert from_trace(path, fitness_tolerance=1e-9).edges["b", "e"]["type"] == "worsening"
     with pytest.warns(FitnessSpreadWarning):
-        assert from_trace(path, tolerance=1e-6).edges["b", "e"]["type"] == "equal"
+        assert from_trace(path, fitness_tolerance=1e-6).edges["b", "e"]["type"] == "equal"
     # Refused only beyond the user's bound on the spread, whatever the tolerance.
     with pytest.warns(FitnessSpreadWarning):
-        from_trace(path, tolerance=0.0, max_fitness_spread=3.1e-8)
+        from_trace(path, fitness_tolerance=0.0, max_fitness_spread=3.1e-8)
     with pytest.raises(ValueError, match=r"3e-08.*max_fitness_spread=2e-08"):
-        from_trace(path, tolerance=1.0, max_fitness_spread=2e-8)
+        from_trace(path, fitness_tolerance=1.0, max_fitness_spread=2e-8)
     with pytest.raises(ValueError, match="max_fitness_spread"):
         from_trace(path, max_fitness_spread=-1.0)
 
@@ -223,7 +224,7 @@ def test_a_clean_trace_does_not_warn(tmp_path):
 
 
 def test_contraction_reaches_a_fixpoint(tmp_path):
-    lon = trace_lon(tmp_path, NEAR_EQUAL_CHAIN, tolerance=1.0)
+    lon = trace_lon(tmp_path, NEAR_EQUAL_CHAIN, fitness_tolerance=1.0)
     assert lon.edges["x", "y"]["type"] == "improving"  # 1.4 apart before any contraction
     compressed = cmlon(lon)
     assert sorted(compressed.nodes[n]["members"] for n in compressed) == [["q"], list("wxyz")]
@@ -236,7 +237,7 @@ def test_contraction_reaches_a_fixpoint(tmp_path):
 
 def test_an_edge_that_ends_up_worsening_between_plateaus_is_dropped(tmp_path):
     rows = "1 1.0 a 1.9 b\n1 1.9 b 2.8 c\n1 2.8 c 3.7 d\n1 3.7 d 2.5 y\n"
-    compressed = cmlon(trace_lon(tmp_path, rows, tolerance=1.0))
+    compressed = cmlon(trace_lon(tmp_path, rows, fitness_tolerance=1.0))
     assert compressed.graph["dropped_worsening"] == 1
     assert compressed.number_of_edges() == 0
     assert sorted(compressed.nodes[n]["members"] for n in compressed) == [list("abcd"), ["y"]]
@@ -262,3 +263,9 @@ def test_worsening_rows_leave_their_target_unaccepted(tmp_path):
     assert not lon.nodes["r"]["accepted"] and not lon.nodes["r"]["sink"]
     assert lon.nodes["b"]["accepted"] and lon.graph["run_ends"] == {"1": "b"}
     assert set(mlon(lon)) == {"a", "b"}
+
+
+def test_the_old_keyword_tolerance_still_works_with_a_deprecation_warning():
+    with pytest.warns(DeprecationWarning, match="fitness_tolerance"):
+        old = build_lon(HAND, tolerance=1e-9)
+    assert nx.utils.graphs_equal(old, build_lon(HAND, fitness_tolerance=1e-9))

@@ -3,9 +3,9 @@
 import networkx as nx
 import pytest
 
-from lonlib.lon import build_lon, cmlon
-from lonlib.lon_io import from_trace, read_trace, to_graphml, to_igraph, to_trace
-from lonlib.lon_metrics import lon_metrics
+from lonlib.lon.graphs import build_lon, cmlon
+from lonlib.lon.io import from_trace, read_trace, to_graphml, to_igraph, to_trace
+from lonlib.lon.metrics import lon_metrics
 from tests.test_lon import (
     HAND,
     PLATEAU_GLOBAL,

@@ -7,8 +7,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from lonlib.lon import build_lon, node_id
-from lonlib.lon_metrics import METRICS, funnel_metrics, lon_metrics, metrics_table, node_metrics
+from lonlib.lon.graphs import build_lon, node_id
+from lonlib.lon.metrics import METRICS, funnel_metrics, lon_metrics, metrics_table, node_metrics
 from tests.test_lon import HAND, PLATEAU_GLOBAL, SELF_LOOP_ON_GLOBAL, trace_lon, trials
 
 

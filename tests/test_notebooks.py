@@ -123,9 +123,9 @@ def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_pa
 
 
 def test_a_missing_experiment_says_so_and_what_to_run(tmp_path, capsys):
-    from lonlib.analysis import load_experiment
+    from lonlib.analysis.pipeline import load_experiment
     from lonlib.cli import main
-    from lonlib.store import MissingExperimentError
+    from lonlib.storage.store import MissingExperimentError
 
     folder = tmp_path / "data" / "quick"
     with pytest.raises(MissingExperimentError, match="no experiment in .*`make reproduce`"):

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from lonlib.paths import project_path, project_root
+from lonlib.util.paths import project_path, project_root
 
 
 def make_project(root: Path) -> Path:

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from lonlib.pendulum import (
+from lonlib.task.pendulum import (
     STEP_CAP,
     CoupledPendulums,
     EndReason,
@@ -15,7 +15,7 @@ from lonlib.pendulum import (
     total_energy,
     wrap_angle,
 )
-from lonlib.rollout import evaluate
+from lonlib.task.rollout import evaluate
 
 FRICTIONLESS = {"cart_friction": 0.0, "hinge_friction": 0.0}
 

@@ -8,9 +8,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from mpl_toolkits.mplot3d.art3d import Path3DCollection  # noqa: E402
 
-from lonlib.lon import build_lon  # noqa: E402
-from lonlib.peaks import PAPER_PEAKS, compare_with_paper, detect_peaks  # noqa: E402
-from lonlib.plots import (  # noqa: E402
+from lonlib.analysis.peaks import PAPER_PEAKS, compare_with_paper, detect_peaks  # noqa: E402
+from lonlib.analysis.plots import (  # noqa: E402
     claim_d_curve_plot,
     fitness_histogram,
     lon_3d,
@@ -18,6 +17,7 @@ from lonlib.plots import (  # noqa: E402
     optima_boxplot,
     sensitivity,
 )
+from lonlib.lon.graphs import build_lon  # noqa: E402
 from tests.test_lon import HAND, trials  # noqa: E402
 
 
@@ -139,8 +139,9 @@ def test_claim_d_curve_has_a_line_per_p_and_marks_the_preregistered_epsilon():
 
 
 def test_figures_colour_and_stack_by_behaviour_label():
-    from lonlib.analysis import optima_to_record
-    from lonlib.plots import label_colour, lon_3d_interactive
+    from lonlib.analysis.pipeline import optima_to_record, slug
+    from lonlib.analysis.plots import label_colour, lon_3d_interactive
+    from lonlib.analysis.recordings import recording_name
     from tests.test_behaviour import labelled_trials
 
     table = labelled_trials()
@@ -158,5 +159,11 @@ def test_figures_colour_and_stack_by_behaviour_label():
     assert legend[:4] == ["balancing", "spinning (in phase)", "spinning", "swinging high"]
     chosen = optima_to_record(table)
     assert set(chosen["behaviour"]) == set(accepted["label"])  # the best of every label
-    assert {"best", "best-spinning", "best-swinging-high"} <= set(chosen["role"])
-    assert "best-spinning-in-phase" in set(chosen["role"])  # file-name safe, no parentheses
+    assert {"best", "label-best"} <= set(chosen["role"])
+    names = {
+        recording_name(r.p, r.run, r.fitness, role=r.role, behaviour=slug(r.behaviour))
+        for r in chosen.itertuples()
+    }
+    # one scheme: <role>_<behaviour>_optimum_..., file-name safe (no parentheses)
+    assert any(n.startswith("label-best_spinning-in-phase_optimum_p=") for n in names)
+    assert any(n.startswith("label-best_swinging-high_optimum_p=") for n in names)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from lonlib.random_streams import (
+from lonlib.ddpg.streams import (
     EXPLORATION_NOISE,
     REPLAY_SAMPLES,
     START_NOISE,

@@ -6,9 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lonlib.nets import actor_spec
-from lonlib.pendulum import PendulumConfig
-from lonlib.record import (
+from lonlib.analysis.recordings import (
     APP_ID,
     record,
     recorded_entities,
@@ -18,7 +16,9 @@ from lonlib.record import (
     scene,
     scene_bounds,
 )
-from lonlib.rollout import run_actors
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec
+from lonlib.task.rollout import run_actors
 
 
 def test_recording_reads_back_with_entities_and_frames(tmp_path):
@@ -99,3 +99,9 @@ def test_a_recording_carries_and_replays_its_scored_episode(tmp_path):
     assert (props["p"], props["run"], props["index"]) == (1e-3, 2, 4)
     assert props["fitness_all"] == scored.fitness_all[0]
     assert episode.trace.fitness[-1, 0] == scored.fitness[0]
+
+
+def test_recording_names_follow_one_scheme():
+    name = recording_name(1e-4, 3, 0.372, role="label-best", behaviour="crash")
+    assert name == "label-best_crash_optimum_p=0.0001_run=3_f=0.372.rrd"
+    assert recording_name(1e-3, 1, 0.5, role="best") == "best_optimum_p=0.001_run=1_f=0.500.rrd"

@@ -14,17 +14,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lonlib import portable_math
-from lonlib.behaviour import describe, describe_actors
-from lonlib.nets import actor_spec
-from lonlib.pendulum import PendulumConfig
-from lonlib.rollout import (
+from lonlib.task.behaviour import describe, describe_actors
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.policy import actor_spec
+from lonlib.task.rollout import (
     Scoring,
     nominal_offsets,
     perturbed_offsets,
     run_actors,
     score_actors,
 )
+from lonlib.util import portable_math
 
 SHORT = PendulumConfig(steps=300)
 SPEC = actor_spec(2)
@@ -77,8 +77,8 @@ def test_one_shared_actor_and_one_actor_per_row_are_the_same_arithmetic():
 
 DISPATCH_SCRIPT = """
 import hashlib, json, numpy as np
-from lonlib.rollout import run_actors, Scoring, score_actors
-from lonlib.pendulum import PendulumConfig
+from lonlib.task.rollout import run_actors, Scoring, score_actors
+from lonlib.task.pendulum import PendulumConfig
 from tests.test_rollout import actors, fingerprint, SHORT
 result = run_actors(actors(11, 6), SHORT, trace=True)
 scores = score_actors(actors(12, 3), SHORT, Scoring(estimate="robust", starts=4))
@@ -243,9 +243,9 @@ def test_every_entry_point_scores_from_the_same_noisy_start():
     gives another start."""
     import tempfile
 
-    from lonlib.ddpg import DDPGConfig
-    from lonlib.record import record, recording_properties
-    from lonlib.rollout import actor_policy, evaluate
+    from lonlib.analysis.recordings import record, recording_properties
+    from lonlib.ddpg.trainer import DDPGConfig
+    from lonlib.task.rollout import actor_policy, evaluate
 
     config = PendulumConfig(steps=300, initial_angle=0.3, initial_noise=0.2)
     thetas = actors(51, 3, 1.0)
@@ -265,7 +265,7 @@ def test_every_entry_point_scores_from_the_same_noisy_start():
 
 @pytest.mark.parametrize("field", ["seed", "eval_seed"])
 def test_negative_seeds_are_refused_by_name(field):
-    from lonlib.ddpg import DDPGConfig
+    from lonlib.ddpg.trainer import DDPGConfig
 
     with pytest.raises(ValueError, match="seed"):
         Scoring(**{field: -1})

@@ -1,4 +1,5 @@
-"""The experiment summary (lonlib.summary) on a synthetic folder written with lonlib.store:
+"""The experiment summary (lonlib.analysis.summary) on a synthetic folder written with
+lonlib.storage.store:
 every count is the stored trials', finished runs follow Algorithm 2's tolerance, and the
 README block is generated between its own markers."""
 
@@ -9,11 +10,7 @@ from unittest import mock
 import pandas as pd
 import pytest
 
-from lonlib.basin_hopping import Trial
-from lonlib.experiment import ExperimentConfig, run_status, status
-from lonlib.inflight import FORMAT
-from lonlib.store import read_experiment_trials, save_step, write_json
-from lonlib.summary import (
+from lonlib.analysis.summary import (
     README_BEGIN,
     README_END,
     behaviour_counts,
@@ -21,6 +18,10 @@ from lonlib.summary import (
     splice_summary,
     summary_markdown,
 )
+from lonlib.experiment.checkpoints import FORMAT
+from lonlib.experiment.running import ExperimentConfig, run_status, status
+from lonlib.search.algorithm import Trial
+from lonlib.storage.store import read_experiment_trials, save_step, write_json
 
 # (fitness, accepted, improved on its start, label) per trial; tolerance 2 ends a run after
 # two rejections in a row.

@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from lonlib.analysis.verify import verify_experiment
 from lonlib.cli import main as cli_main
-from lonlib.store import optimum_path, trials_path
-from lonlib.verify import verify_experiment
+from lonlib.storage.store import optimum_path, trials_path
 
 
 def test_a_fresh_experiment_replays_every_stored_number(tiny_experiment, capsys):
@@ -83,15 +83,15 @@ def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
 def test_an_experiment_of_another_result_path_is_not_extended(damaged):
     import dataclasses
 
-    from lonlib.experiment import run_experiment
-    from lonlib.store import read_manifest
+    from lonlib.experiment.running import run_experiment
+    from lonlib.storage.store import read_manifest
 
     folder, _ = damaged
     manifest = folder / "manifest.json"
     data = json.loads(manifest.read_text())
     data["sessions"][0]["result_path_version"] = None
     manifest.write_text(json.dumps(data))
-    from lonlib.configs import ExperimentConfig
+    from lonlib.storage.configs import ExperimentConfig
 
     config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
     run_experiment(config, folder, progress=False)  # finished: nothing to sample, no refusal
@@ -122,7 +122,7 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
 @pytest.fixture(scope="module")
 def robust_experiment(tmp_path_factory):
     """The tiny experiment under fitness_estimate robust, with start noise and other seeds."""
-    from lonlib.experiment import load_config, run_experiment
+    from lonlib.experiment.running import load_config, run_experiment
     from tests.conftest import write_tiny_yaml
 
     folder = tmp_path_factory.mktemp("robust")
@@ -144,7 +144,7 @@ def robust_experiment(tmp_path_factory):
 
 
 def test_a_robust_experiment_replays_and_its_reanalysis_is_consistent(robust_experiment):
-    from lonlib.conditioning import (
+    from lonlib.analysis.conditioning import (
         edges_no_longer_improving,
         replay_optima,
         retention_curve,
@@ -179,11 +179,11 @@ def test_a_robust_fitness_changed_by_a_rounding_is_an_error(robust_experiment, t
 
 
 def test_a_recording_of_another_episode_is_an_error(damaged):
-    from lonlib.record import record
-    from lonlib.store import read_manifest, read_optimum
+    from lonlib.analysis.recordings import record
+    from lonlib.storage.store import read_manifest, read_optimum
 
     folder, trials = damaged
-    from lonlib.configs import ExperimentConfig
+    from lonlib.storage.configs import ExperimentConfig
 
     config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
     rows = trials[(trials.p == trials.p.iloc[0]) & (trials.run == trials.run.iloc[0])]

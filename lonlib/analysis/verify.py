@@ -1,0 +1,351 @@
+"""``lonlib verify``: every number stored for a local optimum replays from its stored Actor.
+
+For every stored trial of an experiment this re-runs its Actor through the public API (the
+one rollout, :func:`lonlib.task.behaviour.describe_actors`, with the experiment's scoring) and
+checks, exactly (bit for bit, no tolerance):
+
+* ``fitness``: the stored fitness is what the Actor scores (the nominal fitness, or the
+  robust mean under ``fitness_estimate: robust``);
+* ``descriptor``: the stored behaviour columns (``b_*``) are the replayed episode's, so they
+  describe the scored episode, and the stored label is that descriptor's label;
+* ``consistency``: ``b_fitness`` equals ``fitness`` (nominal estimate) and the end step can
+  carry the fitness (``fitness_all <= end_step / steps``);
+* ``recording``: every ``recordings/*.rrd`` names a stored trial (p, run, index) in its
+  ``optimum`` property, carries that trial's fitness, and its Actor replays to it.
+
+Severity: on data of the current result-path version (:mod:`lonlib.storage.result_path`) every
+mismatch is an error; on data sampled under another (or an unrecorded) version they are
+warnings, reported with their counts, so an old experiment stays analysable while it is
+replaced. A trial stored without its Actor (older experiments kept accepted optima only)
+is a warning, "no Actor stored".
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from lonlib.storage.result_path import RESULT_PATH_VERSION
+from lonlib.storage.store import CorruptDataError, optimum_path, read_manifest, read_optimum
+from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
+from lonlib.task.policy import actor_spec
+
+__all__ = ["Finding", "VerifyReport", "verify_experiment"]
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One check that did not hold (or could not run) for one trial or recording."""
+
+    severity: str  # "error" or "warning"
+    check: str  # fitness, descriptor, label, consistency, actor, recording, version
+    p: float | None
+    run: int | None
+    index: int | None
+    message: str
+
+    def __str__(self) -> str:
+        where = "" if self.p is None else f"p={self.p:g} run {self.run} index {self.index}: "
+        return f"{self.severity}: [{self.check}] {where}{self.message}"
+
+
+@dataclass
+class VerifyReport:
+    """What :func:`verify_experiment` found."""
+
+    folder: Path
+    trials: int = 0  # trials in the experiment
+    replayed: int = 0  # trials whose Actor was stored and replayed
+    recordings: int = 0  # recordings checked
+    current_version: bool = True  # every session ran the current result-path version
+    findings: list[Finding] = field(default_factory=list)
+
+    @property
+    def errors(self) -> list[Finding]:
+        """Findings that fail the verification."""
+        return [f for f in self.findings if f.severity == "error"]
+
+    @property
+    def warnings(self) -> list[Finding]:
+        """Findings reported without failing it."""
+        return [f for f in self.findings if f.severity == "warning"]
+
+    @property
+    def ok(self) -> bool:
+        """True when no check failed (warnings allowed)."""
+        return not self.errors
+
+    def counts(self) -> Counter:
+        """Findings by (severity, check)."""
+        return Counter((f.severity, f.check) for f in self.findings)
+
+    def summary(self) -> str:
+        """A few lines for the terminal: what was checked and what did not hold."""
+        lines = [
+            f"{self.folder}: {self.trials} trials, {self.replayed} replayed from their stored "
+            f"Actor, {self.recordings} recordings"
+        ]
+        if not self.current_version:
+            lines.append(
+                f"sampled under another result-path version than this code's "
+                f"({RESULT_PATH_VERSION}): mismatches are reported as warnings"
+            )
+        for (severity, check), count in sorted(self.counts().items()):
+            lines.append(f"  {severity}s [{check}]: {count}")
+        lines.append("verify: OK" if self.ok else f"verify: FAILED ({len(self.errors)} errors)")
+        return "\n".join(lines)
+
+
+def session_versions(folder: Path) -> list[str | None]:
+    """The result-path version each session of an experiment recorded (None: unrecorded)."""
+    sessions = read_manifest(folder).get("sessions", [])
+    return [session.get("result_path_version") for session in sessions]
+
+
+def _provenance_findings(folder: Path) -> list[Finding]:
+    """Warnings for sessions that ran another environment (lock hash or installed set) or
+    other torch CPU kernels than the others: training may then differ in the last bits."""
+    sessions = read_manifest(folder).get("sessions", [])
+    facts = {
+        "environment (lock or installed packages)": [
+            (s.get("environment") or {}).get("installed_sha256") for s in sessions
+        ],
+        "torch CPU kernels": [(s.get("cpu") or {}).get("torch") for s in sessions],
+    }
+    out = []
+    for what, values in facts.items():
+        recorded = [v for v in values if v is not None]
+        if len(set(recorded)) > 1:
+            out.append(
+                Finding(
+                    "warning",
+                    "provenance",
+                    None,
+                    None,
+                    None,
+                    f"sessions ran with {len(set(recorded))} different {what} "
+                    f"({', '.join(sorted(str(v)[:12] for v in set(recorded)))}): their runs may "
+                    "differ from a single-session run in the last bits of training",
+                )
+            )
+    return out
+
+
+def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 32) -> VerifyReport:
+    """Replay every stored trial (and recording) of the experiment in ``folder`` and report
+    what does not come back exactly (see the module docstring)."""
+    from lonlib.analysis.pipeline import load_experiment
+
+    folder = Path(folder)
+    config, trials = load_experiment(folder)
+    versions = session_versions(folder)
+    current = bool(versions) and all(v == RESULT_PATH_VERSION for v in versions)
+    report = VerifyReport(folder, trials=len(trials), current_version=current)
+    mismatch = "error" if current else "warning"
+    if not current:
+        found = sorted({str(v) for v in versions})
+        report.findings.append(
+            Finding(
+                "warning",
+                "version",
+                None,
+                None,
+                None,
+                f"sessions ran result-path versions {found} ('None': not recorded); this code "
+                f"is {RESULT_PATH_VERSION}",
+            )
+        )
+    report.findings.extend(_provenance_findings(folder))
+    thetas, rows = _stored_actors(folder, trials, config, report, mismatch)
+    scoring = config.ddpg.scoring
+    replayed: dict[tuple[float, int, int], BehaviourDescriptor] = {}
+    for start in range(0, len(rows), batch):
+        chunk = rows[start : start + batch]
+        descriptors = describe_actors(np.stack(thetas[start : start + batch]), config.env, scoring)
+        for row, descriptor in zip(chunk, descriptors, strict=True):
+            report.findings.extend(_check_trial(row, descriptor, scoring.estimate, mismatch))
+            replayed[(float(row["p"]), int(row["run"]), int(row["index"]))] = descriptor
+        report.replayed += len(chunk)
+    if recordings:
+        _check_recordings(folder, trials, replayed, report, mismatch)
+    return report
+
+
+def _stored_actors(
+    folder: Path, trials: pd.DataFrame, config, report: VerifyReport, mismatch: str
+) -> tuple[list[np.ndarray], list[dict]]:
+    """The stored Actors that can be replayed; a missing or unusable file is a finding
+    naming it (an error on data of this result-path version, where every trial's Actor is
+    stored; a warning on older data, which kept accepted optima only)."""
+    size = actor_spec(config.env.n_carts).n_params
+    thetas, rows = [], []
+    for row in trials.to_dict("records"):
+        p, run, index = float(row["p"]), int(row["run"]), int(row["index"])
+        path = optimum_path(folder, p, run, index)
+        if not path.exists():
+            report.findings.append(Finding(mismatch, "actor", p, run, index, "no Actor stored"))
+            continue
+        try:
+            theta = np.asarray(read_optimum(path).theta)
+        except CorruptDataError as error:
+            report.findings.append(Finding("error", "actor", p, run, index, str(error)))
+            continue
+        if theta.shape != (size,) or not np.isfinite(theta).all():
+            problem = "NaN or infinite values" if theta.shape == (size,) else f"shape {theta.shape}"
+            report.findings.append(
+                Finding(
+                    "error",
+                    "actor",
+                    p,
+                    run,
+                    index,
+                    f"{path}: the Actor has {problem}, not {size} finite parameters",
+                )
+            )
+            continue
+        thetas.append(theta)
+        rows.append(row)
+    return thetas, rows
+
+
+def _check_trial(
+    row: dict, replayed: BehaviourDescriptor, estimate: str, severity: str
+) -> Iterable[Finding]:
+    p, run, index = float(row["p"]), int(row["run"]), int(row["index"])
+    expected = replayed.robust_mean if estimate == "robust" else replayed.fitness
+    if not _same(row["fitness"], expected):
+        yield Finding(
+            severity,
+            "fitness",
+            p,
+            run,
+            index,
+            f"stored {row['fitness']!r}, its Actor scores {expected!r}",
+        )
+    stored_columns = {k: v for k, v in row.items() if k.startswith(PREFIX)}
+    if not stored_columns:
+        yield Finding(severity, "descriptor", p, run, index, "no behaviour descriptor stored")
+        return
+    differing = [
+        f"{name} stored {stored_columns.get(name)!r}, replayed {value!r}"
+        for name, value in replayed.to_columns().items()
+        if not _same(stored_columns.get(name), value)
+    ]
+    if differing:
+        shown = "; ".join(differing[:3]) + (
+            f"; +{len(differing) - 3} more" if len(differing) > 3 else ""
+        )
+        yield Finding(severity, "descriptor", p, run, index, shown)
+    if row.get("label") != label(replayed):
+        yield Finding(
+            severity,
+            "label",
+            p,
+            run,
+            index,
+            f"stored {row.get('label')!r}, the scored episode is {label(replayed)!r}",
+        )
+    if estimate == "nominal" and not _same(row.get(f"{PREFIX}fitness"), row["fitness"]):
+        yield Finding(
+            severity,
+            "consistency",
+            p,
+            run,
+            index,
+            f"b_fitness {row.get(f'{PREFIX}fitness')!r} differs from fitness {row['fitness']!r}",
+        )
+    end_step, steps = row.get(f"{PREFIX}end_step"), row.get(f"{PREFIX}nominal_steps")
+    possible = not (_number(end_step) and _number(steps)) or (
+        row["fitness"] <= end_step / steps + 1e-12
+    )
+    if estimate == "nominal" and not possible:
+        yield Finding(
+            severity,
+            "consistency",
+            p,
+            run,
+            index,
+            f"fitness {row['fitness']:.4f} cannot come from an episode that ended at step "
+            f"{int(end_step)} of {int(steps)}",
+        )
+
+
+def _check_recordings(folder, trials, replayed, report, mismatch) -> None:
+    """Each recording names a stored trial and shows its nominal episode: the recording's
+    fitness, end reason and end step equal the trial's stored nominal fitness and those of
+    its Actor's replayed episode."""
+    from lonlib.analysis.recordings import recording_properties
+
+    by_key = {(float(r.p), int(r.run), int(r.index)): r for r in trials.itertuples()}
+    for path in sorted((folder / "recordings").glob("*.rrd")):
+        report.recordings += 1
+        try:
+            props = recording_properties(path)
+        except Exception as error:  # a damaged file is a finding, not a crash
+            report.findings.append(
+                Finding(
+                    mismatch, "recording", None, None, None, f"{path.name}: unreadable ({error})"
+                )
+            )
+            continue
+        key = props.get("p"), props.get("run"), props.get("index")
+        if None in key:
+            report.findings.append(
+                Finding(
+                    mismatch,
+                    "recording",
+                    None,
+                    None,
+                    None,
+                    f"{path.name}: names no trial (recorded before recordings carried p, run "
+                    "and index); `lonlib record` records it again",
+                )
+            )
+            continue
+        key = (float(key[0]), int(key[1]), int(key[2]))
+        trial = by_key.get(key)
+        if trial is None:
+            report.findings.append(
+                Finding(mismatch, "recording", *key, f"{path.name}: no such stored trial")
+            )
+            continue
+        stored = getattr(trial, f"{PREFIX}fitness", trial.fitness)
+        shown = {k: props.get(k) for k in ("fitness", "end_reason", "end_step")}
+        expected = {"fitness": stored}
+        descriptor = replayed.get(key)
+        if descriptor is not None:
+            expected.update(end_reason=descriptor.end_reason, end_step=descriptor.end_step)
+        differing = [
+            f"{name} {shown[name]!r}, the trial's {value!r}"
+            for name, value in expected.items()
+            if not _same(shown[name], value)
+        ]
+        if differing:
+            report.findings.append(
+                Finding(
+                    mismatch,
+                    "recording",
+                    *key,
+                    f"{path.name} shows another episode: {'; '.join(differing)}",
+                )
+            )
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(value)
+
+
+def _same(stored, replayed) -> bool:
+    """Exact equality, NaN equal to NaN (a one-rod phase), numbers compared as floats."""
+    if isinstance(stored, str) or isinstance(replayed, str):
+        return stored == replayed
+    if stored is None or replayed is None:
+        return stored is replayed
+    stored, replayed = float(stored), float(replayed)
+    return stored == replayed or (math.isnan(stored) and math.isnan(replayed))

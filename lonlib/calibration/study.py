@@ -1,0 +1,555 @@
+"""Calibration study: which physics lets DDPG leave the zero-fitness plateau, and how.
+
+A study is a grid of **cells**; a cell fixes the motor model (force, acceleration or
+velocity), its gain or time constant, the integrator and the DDPG reward. For every cell,
+``seeds`` agents train with lonlib's batched DDPG (:func:`lonlib.ddpg.trainer.local_search_batch`,
+one call per cell) for exactly ``max_steps`` environment steps each (no early stop, so cells
+compare at equal budget). Seed ``i`` starts from the same Actor and Critic and draws the same
+random streams in every cell (common random numbers), so cells differ only by their physics.
+
+Per search the study reads the training history (greedy fitness after every episode) and
+replays the returned Actor greedily once; per cell it reports
+
+* the share of searches **leaving zero** (best greedy fitness of a trained policy > 0),
+* the **env steps to the first non-zero** greedy fitness,
+* the **best fitness**, and
+* **what the best policies do** in their greedy rollout (:func:`greedy_rollout`, the
+  behaviour descriptor of :mod:`lonlib.task.behaviour`): upright share and signed full turns per
+  rod, end reason and step, the carts' mean range, the fitness from perturbed starts, and
+  the behaviour label (one of :data:`lonlib.task.behaviour.LABELS`).
+
+Beside the grid, :func:`integrator_drift` measures each integrator's energy and momentum
+drift in a short motor-off, friction-off rollout (force model: the cart is free, so the
+cart-and-rod energy and horizontal momentum are both conserved by the continuous equations).
+Every episode here runs through the one rollout (:func:`lonlib.task.rollout.run_policy`).
+
+:func:`run_calibration` runs the cells in a process pool (one torch thread per worker) and
+writes each finished cell atomically to ``<out>/cells/<cell>.json`` (its Actors to
+``<cell>.npz``): a killed study resumes with the cells it has not finished. It then writes
+its report (:mod:`lonlib.calibration.report`): ``calibration.csv`` (one row per cell),
+``searches.csv`` (one row per search), ``drift.csv``, ``calibration.md`` and
+``calibration.png``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from lonlib.ddpg.trainer import DDPGConfig, local_search_batch
+from lonlib.storage.store import atomic_write, read_json, write_json
+from lonlib.task.behaviour import describe_actors, label
+from lonlib.task.pendulum import PendulumConfig, total_energy, wrap_angle
+from lonlib.task.policy import actor_spec, critic_spec
+from lonlib.task.rollout import Scoring, run_policy
+from lonlib.util import portable_math
+from lonlib.util.validation import (
+    check_choice,
+    check_field_types,
+    check_name,
+    check_range,
+    read_yaml_mapping,
+)
+
+MOTORS = ("force", "acceleration", "velocity")
+INTEGRATORS = ("euler", "semi-implicit")
+REWARDS = ("height", "slow-height", "upright")
+CELL_PHYSICS = ("motor", "integrator", "motor_gain", "motor_tau", "reward")
+# Version of what a stored cell's searches hold; part of the settings, so that cells stored
+# before the one rollout and behaviour descriptor (per-cart ``cart_range_<i>``, the study's
+# own labels, other arithmetic) are refused rather than mixed with new ones.
+RECORD_FORMAT = 2
+# Greedy fitness that only balancing reaches: every rod upright >= 90 % of the episode, swing-up
+# included (a spinning rod is upright about half the time: no optimum of the default grid, all
+# spinning or ending early, scores above 0.51); the study reports the env steps to the first.
+BALANCING_FITNESS = 0.9
+
+CELL_COLUMNS = [
+    "cell",
+    "motor",
+    "integrator",
+    "motor_gain",
+    "motor_tau",
+    "reward",
+    "searches",
+    "left_zero",
+    "share_left_zero",
+    "first_nonzero_steps_min",
+    "first_nonzero_steps_median",
+    "first_nonzero_steps_max",
+    "balanced",
+    "first_balancing_steps_min",
+    "first_balancing_steps_median",
+    "first_balancing_steps_max",
+    "best_fitness",
+    "median_best_fitness",
+    "behaviours",
+    "best_upright_share",
+    "best_turns",
+    "best_end_reason",
+    "best_end_step",
+    "best_cart_range",
+    "seconds",
+]
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One physics setting of the grid. ``motor_gain`` matters for the force [N per unit of
+    command] and acceleration [m/s^2 per unit] motors, ``motor_tau`` [s] for the velocity
+    motor (its gain stays 1: the command range is the +-2 m/s of the velocity sensors)."""
+
+    motor: str = "velocity"
+    integrator: str = "semi-implicit"
+    motor_gain: float = 1.0
+    motor_tau: float = 0.02
+    reward: str = "height"
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        check_choice("motor", self.motor, MOTORS)
+        check_choice("integrator", self.integrator, INTEGRATORS)
+        check_choice("reward", self.reward, REWARDS)
+        check_range("motor_gain", self.motor_gain, 0.0, low_open=True)
+        check_range("motor_tau", self.motor_tau, 0.0, low_open=True)
+
+    @property
+    def name(self) -> str:
+        """File-safe, readable name, e.g. ``velocity-tau0.02_semi-implicit_height``."""
+        motor = (
+            f"velocity-tau{self.motor_tau:g}"
+            if self.motor == "velocity"
+            else f"{self.motor}-gain{self.motor_gain:g}"
+        )
+        return f"{motor}_{self.integrator}_{self.reward}"
+
+    def env(self, base: PendulumConfig) -> PendulumConfig:
+        """``base`` with this cell's physics (validated by :class:`PendulumConfig`)."""
+        return dataclasses.replace(
+            base,
+            motor=self.motor,
+            integrator=self.integrator,
+            motor_gain=1.0 if self.motor == "velocity" else self.motor_gain,
+            motor_tau=self.motor_tau,
+            reward=self.reward,
+        )
+
+
+def grid(
+    motors: tuple[str, ...] = MOTORS,
+    integrators: tuple[str, ...] = INTEGRATORS,
+    force_gains: tuple[float, ...] = (1.0,),
+    acceleration_gains: tuple[float, ...] = (1.0,),
+    velocity_taus: tuple[float, ...] = (0.02,),
+    rewards: tuple[str, ...] = ("height",),
+) -> tuple[Cell, ...]:
+    """The product of the axes: every motor with each of its gains (or taus), every
+    integrator, every reward."""
+    settings = {
+        "force": [{"motor_gain": g} for g in force_gains],
+        "acceleration": [{"motor_gain": g} for g in acceleration_gains],
+        "velocity": [{"motor_tau": t} for t in velocity_taus],
+    }
+    return tuple(
+        Cell(motor=motor, integrator=integrator, reward=reward, **setting)
+        for motor in motors
+        for setting in settings[motor]
+        for integrator in integrators
+        for reward in rewards
+    )
+
+
+DEFAULT_CELLS = grid(force_gains=(1.0, 5.0), velocity_taus=(0.02, 0.1)) + (
+    Cell("velocity", "semi-implicit", motor_tau=0.02, reward="slow-height"),
+)
+"""Every motor with both integrators and the ``height`` reward (force at 2 N and 10 N,
+acceleration at +-2 m/s^2, velocity at tau = 0.02 s and 0.1 s), plus the velocity motor
+(tau = 0.02 s, semi-implicit) with the ``slow-height`` reward: 11 cells."""
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """A calibration study: the grid, the seeds per cell and the DDPG budget.
+
+    ``env`` is the physics every cell starts from (cells replace motor, gain, tau,
+    integrator and reward); ``ddpg`` holds the other DDPG hyperparameters. Every search
+    trains exactly ``max_steps`` env steps with minibatches of ``batch_size``.
+    """
+
+    name: str = "default"
+    """Study name: the folder's default name."""
+    cells: tuple[Cell, ...] = DEFAULT_CELLS
+    """The grid: one cell per motor, gain or tau, integrator and reward."""
+    seeds: int = 3
+    """DDPG searches per cell."""
+    seed: int = 0
+    """Study seed: search ``k`` of a cell is seeded from it."""
+    max_steps: int = 150_000
+    """Environment steps every search trains (no early stop)."""
+    batch_size: int = 256
+    """DDPG minibatch size of every search."""
+    env: PendulumConfig = field(default_factory=PendulumConfig)
+    """The physics every cell starts from (cells replace motor, gain, tau, integrator, reward)."""
+    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    """The other DDPG hyperparameters."""
+    drift_steps: int = 2000
+    """Steps of the motor-off energy-drift check of each integrator."""
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        check_name(self.name)
+        if not self.cells or not all(isinstance(c, Cell) for c in self.cells):
+            raise ValueError("cells must list at least one Cell")
+        names = [cell.name for cell in self.cells]
+        if len(set(names)) != len(names):
+            raise ValueError(f"cells must not repeat, got {names}")
+        check_range("seeds", self.seeds, 1, 1000)
+        check_range("seed", self.seed, 0, 2**63 - 1)
+        check_range("max_steps", self.max_steps, 1)
+        check_range("batch_size", self.batch_size, 1)
+        check_range("drift_steps", self.drift_steps, 1, 100_000)
+        for cell in self.cells:  # every cell's physics must be valid before any compute
+            cell.env(self.env)
+        _ = self.hp  # validates the combined DDPG settings
+
+    @property
+    def hp(self) -> DDPGConfig:
+        """The DDPG settings of every search: a fixed budget of ``max_steps``."""
+        return dataclasses.replace(
+            self.ddpg,
+            batch_size=self.batch_size,
+            max_steps=self.max_steps,
+            min_steps=self.max_steps,
+            patience_steps=self.max_steps,
+            warmup_steps=min(self.ddpg.warmup_steps, self.max_steps),
+            threads=1,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain mapping (YAML/JSON friendly) that :meth:`from_mapping` reads back."""
+        out = dataclasses.asdict(self)
+        out["cells"] = [dataclasses.asdict(cell) for cell in self.cells]
+        return out
+
+    def settings(self) -> dict[str, Any]:
+        """Everything a stored cell depends on besides the cell itself."""
+        out = self.to_dict()
+        for key in ("name", "cells", "drift_steps"):
+            out.pop(key)
+        # Every cell replaces these, so a change of the package's physics defaults must not
+        # invalidate stored cells.
+        for key in CELL_PHYSICS:
+            out["env"].pop(key)
+        out["record_format"] = RECORD_FORMAT
+        return out
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any]) -> CalibrationConfig:
+        """Build from a mapping (YAML): ``base: default|tiny`` starts from a named grid;
+        ``env`` and ``ddpg`` list only changed keys; unknown keys are refused by name."""
+        values = dict(values)
+        base = named_calibration(values.pop("base", "default")).to_dict()
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown calibration key(s) {unknown}; allowed: {sorted(known)}")
+        env = {**base.pop("env"), **(values.pop("env", None) or {})}
+        ddpg = {**base.pop("ddpg"), **(values.pop("ddpg", None) or {})}
+        unknown = sorted(set(ddpg) - {f.name for f in dataclasses.fields(DDPGConfig)})
+        if unknown:
+            raise ValueError(f"unknown ddpg key(s) {unknown}")
+        merged = {**base, **values}
+        cell_fields = {f.name for f in dataclasses.fields(Cell)}
+        cells = []
+        for cell in merged.pop("cells"):
+            if not isinstance(cell, dict) or set(cell) - cell_fields:
+                raise ValueError(f"a cell must be a mapping of {sorted(cell_fields)}, got {cell!r}")
+            cells.append(Cell(**cell))
+        return cls(
+            cells=tuple(cells),
+            env=PendulumConfig.from_mapping(env),
+            ddpg=DDPGConfig(**ddpg),
+            **merged,
+        )
+
+
+def named_calibration(name: str) -> CalibrationConfig:
+    """``default``: the 11 :data:`DEFAULT_CELLS` x 3 seeds x 150k env steps at batch 256 on
+    two carts.
+    ``tiny``: two cells on one cart with 50-step episodes and 400 env steps per search,
+    for tests (seconds)."""
+    if name == "default":
+        return CalibrationConfig()
+    if name == "tiny":
+        return CalibrationConfig(
+            name="tiny",
+            cells=(Cell("velocity", "semi-implicit", motor_tau=0.02), Cell("force", "euler")),
+            seeds=2,
+            max_steps=400,
+            batch_size=32,
+            env=PendulumConfig(n_carts=1, steps=50, upright_angle=2.6),
+            ddpg=DDPGConfig(buffer_size=500, warmup_steps=50),
+            drift_steps=200,
+        )
+    raise ValueError(f"unknown calibration grid {name!r}; use 'default', 'tiny' or a YAML file")
+
+
+def load_calibration(spec: str | Path) -> CalibrationConfig:
+    """A named grid (``default``, ``tiny``) or a YAML file of :class:`CalibrationConfig`
+    keys (``base: default|tiny`` plus changes)."""
+    if str(spec) in ("default", "tiny"):
+        return named_calibration(str(spec))
+    path = Path(spec)
+    if not path.is_file():
+        raise ValueError(f"calibration grid {spec!r} is neither 'default', 'tiny' nor a file")
+    return CalibrationConfig.from_mapping(read_yaml_mapping(path, "calibration"))
+
+
+def with_overrides(
+    config: CalibrationConfig,
+    seeds: int | None = None,
+    max_steps: int | None = None,
+    batch_size: int | None = None,
+) -> CalibrationConfig:
+    """``config`` with the given seeds, budget and batch (None keeps the grid's own)."""
+    changes = {"seeds": seeds, "max_steps": max_steps, "batch_size": batch_size}
+    return dataclasses.replace(config, **{k: v for k, v in changes.items() if v is not None})
+
+
+# ---------------------------------------------------------------------------- rollouts
+def greedy_rollout(
+    thetas: np.ndarray, env: PendulumConfig, scoring: Scoring | int | None = None
+) -> pd.DataFrame:
+    """What each Actor (row of ``thetas [k, P]``) does in its greedy episode: one row per
+    Actor, from :func:`lonlib.task.behaviour.describe_actors` (one batched rollout).
+
+    Columns: ``rollout_fitness`` (Algorithm 1 under the config's ``fitness_mode``, from the
+    nominal start: the fitness the search compared), ``fitness_all`` and ``fitness_mean``
+    (the same episode under both aggregations), ``end_reason`` (lower-case
+    :class:`~lonlib.task.pendulum.EndReason` name) and ``end_step`` (steps executed); per rod
+    ``i`` ``upright_share_<i>`` (steps with the rod upright / steps **executed**, not the
+    nominal steps the fitness divides by: a rod upright throughout an episode that ended
+    early reads 1) and ``turns_<i>`` (signed full turns); ``cart_range`` (max x - min x
+    [m], mean over carts); ``robust_mean`` and ``robust_min`` (the fitness from the
+    scoring's perturbed starts); ``behaviour`` (:func:`lonlib.task.behaviour.label`).
+
+    ``scoring`` gives the starts (:class:`lonlib.task.rollout.Scoring`, default ``Scoring()``);
+    an int is read as the nominal start's ``eval_seed`` (the former ``seed`` argument).
+    """
+    if scoring is None:
+        scoring = Scoring()
+    elif not isinstance(scoring, Scoring):
+        scoring = Scoring(eval_seed=int(scoring))
+    descriptors = describe_actors(np.atleast_2d(np.asarray(thetas)), env, scoring)
+    rows = []
+    for d in descriptors:
+        row: dict[str, Any] = {
+            "rollout_fitness": d.fitness,
+            "fitness_all": d.fitness_all,
+            "fitness_mean": d.fitness_mean,
+            "end_reason": d.end_reason.lower(),
+            "end_step": d.end_step,
+        }
+        for i, (share, turns) in enumerate(zip(d.upright_share, d.turns, strict=True)):
+            row[f"upright_share_{i}"] = share
+            row[f"turns_{i}"] = turns
+        row.update(
+            {
+                "cart_range": d.cart_range,
+                "robust_mean": d.robust_mean,
+                "robust_min": d.robust_min,
+                "behaviour": label(d),
+            }
+        )
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _motor_off(observation: np.ndarray) -> np.ndarray:
+    """The constant policy of :func:`integrator_drift`: command 0.5, no force."""
+    return np.full((len(observation), 1), 0.5)
+
+
+def integrator_drift(env: PendulumConfig, steps: int = 2000, swing: float = 0.02) -> pd.DataFrame:
+    """Energy and momentum drift of each integrator with the motor and friction off.
+
+    One cart (force model, ``env``'s masses, rod and dt), the rod released ``swing`` rad from
+    hanging, the cart at rest, ``steps`` control steps on an endless track, run by the one
+    rollout (:func:`lonlib.task.rollout.run_policy`, traced) with a constant zero-force command.
+    The continuous equations conserve the energy ``E`` and the horizontal momentum
+    ``p = (M + m) x_dot + m l cos(phi) phi_dot``. Reports per integrator the largest
+    ``|E - E0|`` [J] and ``|p - p0|`` [kg m/s], the final energy gain above the hanging rest
+    relative to the start's, and the swing amplitude over the last tenth of the rollout
+    relative to ``swing`` (1 = conserved; a rod that goes over the top reads ~pi / swing).
+    """
+    rows = []
+    for integrator in INTEGRATORS:
+        cfg = dataclasses.replace(
+            env,
+            n_carts=1,
+            motor="force",
+            integrator=integrator,
+            cart_friction=0.0,
+            hinge_friction=0.0,
+            track_half_length_base=1e9,
+            steps=steps,
+            initial_noise=0.0,
+            initial_angle=math.pi,
+        )
+        m, l, big_m = cfg.pole_mass, cfg.pole_half_length, cfg.cart_mass
+        offsets = np.zeros((4, 1, 1))
+        offsets[2] = -swing  # phi = pi - swing: released from rest
+        trace = run_policy(_motor_off, cfg, offsets, trace=True).trace
+        # the start, then the state after every step, of the one episode: [steps + 1]
+        x_dot = np.concatenate([[0.0], trace.x_dot[:, 0, 0]])
+        phi = np.concatenate([[math.pi - swing], trace.phi[:, 0, 0]])
+        phi_dot = np.concatenate([[0.0], trace.phi_dot[:, 0, 0]])
+        if len(phi) != steps + 1:
+            raise RuntimeError(f"the drift rollout ended after {len(phi) - 1} of {steps} steps")
+        energy = total_energy(cfg, x_dot, phi, phi_dot)
+        momentum = (big_m + m) * x_dot + m * l * portable_math.cos(phi) * phi_dot
+        bottom = -m * cfg.gravity * l
+        tail = phi[1 + steps - max(steps // 10, 1) :]
+        rows.append(
+            {
+                "integrator": integrator,
+                "steps": steps,
+                "energy_drift": float(np.max(np.abs(energy[1:] - energy[0]))),
+                "momentum_drift": float(np.max(np.abs(momentum[1:] - momentum[0]))),
+                "energy_ratio": float((energy[-1] - bottom) / (energy[0] - bottom)),
+                "amplitude_ratio": float(np.max(np.pi - np.abs(wrap_angle(tail)))) / swing,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------------------- one cell
+def seed_streams(config: CalibrationConfig, index: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Start Actor, start Critic and DDPG seed of search ``index``: the same in every cell."""
+    rng = np.random.default_rng([config.seed, index, 0])
+    n = config.env.n_carts
+    ddpg_seed = int(np.random.SeedSequence([config.seed, index, 1]).generate_state(1)[0])
+    return actor_spec(n).initial(rng), critic_spec(n).initial(rng), ddpg_seed
+
+
+def run_cell(cell: Cell, config: CalibrationConfig) -> tuple[dict[str, Any], np.ndarray]:
+    """Train ``config.seeds`` agents on one cell (one batched DDPG call) and describe them.
+
+    Returns the cell record (JSON-ready: the cell, the settings, one entry per search with
+    its history and greedy rollout) and the returned Actors ``[seeds, P]``.
+    """
+    start = time.perf_counter()
+    env = cell.env(config.env)
+    streams = [seed_streams(config, i) for i in range(config.seeds)]
+    thetas = np.stack([s[0] for s in streams])
+    omegas = np.stack([s[1] for s in streams])
+    results = local_search_batch(thetas, omegas, env, config.hp, [s[2] for s in streams])
+    best_thetas = np.stack([r.theta for r in results])
+    rollouts = greedy_rollout(best_thetas, env, config.hp.scoring)
+    searches = []
+    for index, (result, rollout) in enumerate(
+        zip(results, rollouts.to_dict("records"), strict=True)
+    ):
+        steps = [h.env_steps for h in result.history]
+        fitness = [h.greedy_fitness for h in result.history]
+        searches.append(
+            {
+                "seed_index": index,
+                **history_summary(steps, fitness),
+                "returned_fitness": result.fitness,
+                "start_fitness": result.start_fitness,
+                "env_steps": result.env_steps,
+                "episodes": len(result.history),
+                **rollout,
+                "history_env_steps": steps,
+                "history_greedy_fitness": fitness,
+            }
+        )
+    record = {
+        "cell": dataclasses.asdict(cell),
+        "name": cell.name,
+        "settings": config.settings(),
+        "seconds": time.perf_counter() - start,
+        "searches": searches,
+    }
+    return record, best_thetas
+
+
+def history_summary(steps: list[int], fitness: list[float]) -> dict[str, Any]:
+    """Best greedy fitness of a trained policy (0 if none was judged), the env steps of the
+    first non-zero one and of the first at least :data:`BALANCING_FITNESS` (None if never),
+    from a search's per-episode history. Episodes before the first update carry no greedy
+    fitness (NaN) and are skipped."""
+    judged = [(s, f) for s, f in zip(steps, fitness, strict=True) if not math.isnan(f)]
+    nonzero = [s for s, f in judged if f > 0]
+    balancing = [s for s, f in judged if f >= BALANCING_FITNESS]
+    return {
+        "best_fitness": max((f for _, f in judged), default=0.0),
+        "first_nonzero_steps": nonzero[0] if nonzero else None,
+        "first_balancing_steps": balancing[0] if balancing else None,
+    }
+
+
+def cell_paths(out: Path, cell: Cell) -> tuple[Path, Path]:
+    """The record (JSON, the commit point) and Actors (npz) of one cell."""
+    folder = Path(out) / "cells"
+    return folder / f"{cell.name}.json", folder / f"{cell.name}.npz"
+
+
+def run_and_store_cell(out: str | Path, cell: Cell, config: CalibrationConfig) -> str:
+    """Run one cell and write it atomically: the Actors first, then the record."""
+    record, thetas = run_cell(cell, config)
+    record_path, actors_path = cell_paths(Path(out), cell)
+
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, theta=thetas.astype(np.float32))
+    atomic_write(actors_path, buffer.getvalue())
+    write_json(record_path, record)
+    return cell.name
+
+
+def read_cell(out: Path, cell: Cell, config: CalibrationConfig) -> dict[str, Any] | None:
+    """A stored cell record, None if the cell has not finished. A record made with other
+    settings (seeds, budget, base physics) raises ValueError naming the file."""
+    path = cell_paths(out, cell)[0]
+    if not path.exists():
+        return None
+    record = read_json(path)
+    if record.get("settings") != json_roundtrip(config.settings()):
+        raise ValueError(
+            f"{path} was computed with other settings than this study's; "
+            "use another output folder or the stored settings"
+        )
+    return record
+
+
+def json_roundtrip(value: Any) -> Any:
+    """``value`` as it reads back from JSON (tuples become lists)."""
+    if isinstance(value, dict):
+        return {k: json_roundtrip(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_roundtrip(v) for v in value]
+    return value
+
+
+__all__ = [
+    "CELL_COLUMNS",
+    "DEFAULT_CELLS",
+    "CalibrationConfig",
+    "Cell",
+    "greedy_rollout",
+    "grid",
+    "integrator_drift",
+    "load_calibration",
+    "named_calibration",
+    "run_cell",
+    "with_overrides",
+]

@@ -1,0 +1,44 @@
+"""DDPG as Algorithm 2's local search ``F`` (:mod:`lonlib.search`): the paper's plug-in.
+
+:func:`ddpg_local_search` binds the DDPG local search (:func:`lonlib.ddpg.trainer.local_search`)
+to an environment and hyperparameters as a :data:`lonlib.search.algorithm.LocalSearch`;
+:func:`local_optimum` turns one DDPG result into Algorithm 2's :class:`LocalOptimum`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from lonlib.ddpg.trainer import local_search
+from lonlib.search.algorithm import LocalOptimum, LocalSearch
+from lonlib.task.behaviour import describe_columns
+
+
+def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSearch:
+    """The paper's ``F``: the DDPG local search bound to an environment and ``h``. With
+    ``describe_optima`` every optimum also gets its behaviour descriptor and label
+    (:mod:`lonlib.task.behaviour`) from one greedy rollout plus a batch of perturbed starts."""
+
+    def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
+        result = local_search(theta, omega, env_config, hp, seed)
+        return local_optimum(result, env_config, hp, describe_optima)
+
+    return search
+
+
+def local_optimum(result, env_config, hp, describe_optima: bool = True) -> LocalOptimum:
+    """A DDPG :class:`lonlib.ddpg.trainer.LocalSearchResult` as Algorithm 2's :class:`LocalOptimum`
+    (with its behaviour descriptor when ``describe_optima``)."""
+    behaviour = describe_columns(result.theta, env_config, hp.scoring) if describe_optima else None
+    return LocalOptimum(
+        fitness=result.fitness,
+        theta=result.theta,
+        omega=result.omega,
+        env_steps=result.env_steps,
+        history=[dataclasses.asdict(record) for record in result.history],
+        start_fitness=result.start_fitness,
+        stop_reason=result.stop_reason,
+        behaviour=behaviour,
+    )

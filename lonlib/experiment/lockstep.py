@@ -1,0 +1,443 @@
+"""The lockstep executor: the local searches of many basin-hopping runs trained as one batch.
+
+One process holds a :class:`lonlib.ddpg.trainer.SlotTrainer` of ``K`` slots. Each slot trains the
+current local search of one run; all ``K`` step and update together (one batched matrix
+product per layer). When a slot's search ends, Algorithm 2 accepts or rejects it for its run
+at once (:class:`lonlib.search.algorithm.BasinHoppingRun`), the trial is stored, and the slot is
+refilled with that run's next search, or with the next pending run once the run has ended
+(continuous batching): the batch stays full while work is pending; once it runs out, the
+batch sheds finished slots (:meth:`~lonlib.ddpg.trainer.SlotTrainer.shrink`).
+
+Every random number a search draws comes from its own ``(run seed, trial)`` streams and no
+reduction mixes slots, so a run's trials do not depend on ``K``, on its slot, or on the runs
+sharing the batch: on the CPU they are bit for bit the serial executor's (tested). Storage
+is the other executors' (:func:`lonlib.storage.store.save_step` after every search, each run's lock
+held while it is in the batch), and every few minutes the whole batch is also written to an
+in-flight checkpoint (:mod:`lonlib.experiment.checkpoints`): a killed lockstep experiment resumes
+its
+searches in flight from there, losing at most the minutes since.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lonlib.ddpg.search_interface import local_optimum
+from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_batch_size
+from lonlib.experiment.checkpoints import (
+    CheckpointUnreadable,
+    InflightCheckpoint,
+    OtherSettings,
+    check_settings,
+    checkpoint_lock_path,
+    inflight_checkpoints,
+    new_checkpoint_path,
+    read_inflight,
+    remove_inflight,
+    remove_leftovers,
+    save_inflight,
+)
+from lonlib.experiment.runs import experiment_plan, open_run, run_lock_path, run_summary
+from lonlib.search.algorithm import BasinHoppingRun, SearchRequest
+from lonlib.storage.lock import LockHeld, exclusive_lock
+from lonlib.storage.store import DataWriteError, Job, save_step
+from lonlib.util.validation import check_range
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_SECONDS = 600.0  # how often a batch writes its in-flight checkpoint
+
+
+class _Yielded(Exception):
+    """A batch stopped, its checkpoint written, because it was asked to yield."""
+
+
+@dataclass
+class _Run:
+    """A run in the batch: its Algorithm 2 driver, the search it waits for, its lock."""
+
+    p: float
+    run: int
+    driver: BasinHoppingRun
+    lock: ExitStack
+    request: SearchRequest | None = None
+
+
+def check_lockstep(hp: DDPGConfig, slots: int) -> None:
+    """Refuse, by name, settings the lockstep executor cannot run."""
+    check_range("slots", slots, 1, 100_000)
+    if hp.update != "lean":
+        raise ValueError(
+            f"the lockstep executor needs ddpg.update='lean' (slot refills), got {hp.update!r}"
+        )
+    check_batch_size(hp, slots)
+
+
+class LockstepBatch:
+    """The lockstep executor's batch (:func:`run_lockstep`): runs of one experiment whose
+    local searches train as one :class:`~lonlib.ddpg.trainer.SlotTrainer`, each slot refilled
+    with its run's next search as one ends, resumed from and saved to in-flight checkpoints.
+    The arguments are :func:`run_lockstep`'s; :meth:`run` trains until the runs end (or the
+    batch yields)."""
+
+    def __init__(
+        self,
+        out: str | Path,
+        config: Any,
+        jobs: Sequence[Job],
+        on_done: Callable[[dict[str, Any]], None],
+        slots: int,
+        wait: bool = False,
+        on_tick: Callable[[dict[str, Any]], None] | None = None,
+        tick_seconds: float = 5.0,
+        checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
+        should_yield: Callable[[], bool] | None = None,
+    ) -> None:
+        self.config, self.slots, self.wait, self.on_done = config, slots, wait, on_done
+        self.on_tick, self.tick_seconds = on_tick, tick_seconds
+        self.checkpoint_seconds, self.should_yield = checkpoint_seconds, should_yield
+        check_lockstep(config.ddpg, slots)
+        if checkpoint_seconds is not None:
+            check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
+        self.out = Path(out)
+        self.plan = experiment_plan(self.out, config)  # a checkpoint listing other runs is refused
+        self.pending: deque[Job] = deque(jobs)
+        self.active: dict[Job, _Run] = {}
+
+        self.deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
+        self.owner = ExitStack()  # the lock of the batch's checkpoint, held while the batch trains
+
+    def lock_and_open(self, job: Job, block: bool) -> _Run:
+        """Run ``job`` locked, its driver resumed from storage (raises LockHeld)."""
+        p, run = job
+        lock = ExitStack()
+        lock.enter_context(exclusive_lock(run_lock_path(self.out, p, run), wait=block))
+        try:
+            return _Run(p, run, open_run(self.out, self.config, p, run), lock)
+        except BaseException:
+            lock.close()
+            raise
+
+    def open_next(self, block: bool = False) -> _Run | None:
+        """The next pending run that still needs a search, locked; None when none is left.
+        A run another process holds is reported (or, with ``wait``, deferred: waiting for
+        it here would stall every search in flight); ``block`` waits for the first one."""
+        while self.pending:
+            job = self.pending.popleft()
+            try:
+                run = self.lock_and_open(job, block)
+            except LockHeld as held:
+                if self.wait:
+                    self.deferred.append(job)
+                else:
+                    self.on_done({"p": job[0], "run": job[1], "held_by": held.holder})
+                continue
+            if run.driver.finished:
+                run.lock.close()
+                self.on_done(run_summary(run.p, run.run, run.driver.state))
+                continue
+            return run
+        return None
+
+    def ask(self, run: _Run) -> _Run:
+        """Make ``run`` active and ask its driver for its next search."""
+        self.active[run.p, run.run] = run  # first, so that the lock is released if asking fails
+        run.request = run.driver.next_search()
+        return run
+
+    def restore(self) -> tuple[SlotTrainer, Path] | None:
+        """The batch of an in-flight checkpoint of pending runs, the runs of its slots that
+        continue made active (the others go back to the front of ``pending``)."""
+        for checkpoint in inflight_checkpoints(self.out, self.plan):
+            if self.checkpoint_seconds is None or set(checkpoint.runs).isdisjoint(self.pending):
+                continue
+            ours = ExitStack()  # a live batch holds its checkpoint's lock
+            try:
+                ours.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint), wait=False))
+            except LockHeld:
+                continue
+            restored = _restore(checkpoint, self.lock_and_open, self.config, set(self.pending))
+            if restored is None:
+                ours.close()
+                continue
+            self.owner.enter_context(ours)
+            trainer, kept, dropped = restored
+            for run in kept:
+                self.pending.remove((run.p, run.run))
+                self.active[run.p, run.run] = run
+            for job in reversed(dropped):  # they restart from their stored trials, first
+                if job in self.pending:  # (not if it has ended)
+                    self.pending.remove(job)
+                    self.pending.appendleft(job)
+            log.info(
+                "%s: resumed %d searches in flight (%s env steps) from %s%s",
+                self.out,
+                len(kept),
+                f"{sum(int(trainer.steps[s]) for s in range(trainer.slots) if trainer.busy[s]):,}",
+                checkpoint.name,
+                f"; {len(dropped)} whose runs went on since restart" if dropped else "",
+            )
+            return trainer, checkpoint.metadata_path
+        return None
+
+    def refill(self, trainer: SlotTrainer, runs: list[_Run]) -> None:
+        """Start the searches ``runs`` asked for in free slots of ``trainer``."""
+        trainer.start(
+            trainer.free_slots()[: len(runs)],
+            np.stack([r.request.theta for r in runs]),
+            np.stack([r.request.omega for r in runs]),
+            [r.request.seed for r in runs],
+            [(r.p, r.run) for r in runs],
+        )
+
+    def batch(self, block_first: bool) -> None:
+        """Train until the pending runs are done (those held by others are deferred)."""
+        with self.owner:
+            self.train(block_first)
+
+    def write_checkpoint(self, trainer: SlotTrainer, checkpoint: Path | None) -> tuple[Path, bool]:
+        """Write the batch to its in-flight checkpoint (a new one, locked, if it has none):
+        the checkpoint's path (kept for the next write even if this one failed) and whether
+        it was written."""
+        if checkpoint is None:
+            checkpoint = new_checkpoint_path(self.out)
+            self.owner.enter_context(exclusive_lock(checkpoint_lock_path(checkpoint)))
+        counts = {tag: len(run.driver.state.trials) for tag, run in self.active.items()}
+        try:
+            save_inflight(checkpoint, trainer, counts)
+        except DataWriteError as error:  # a cache: the experiment goes on without it
+            log.warning("in-flight checkpoint not written (%s)", error)
+            return checkpoint, False
+        return checkpoint, True
+
+    def train(self, block_first: bool) -> None:
+        """One batch: restored from a checkpoint or filled anew, trained until its runs end
+        (raises :class:`_Yielded` when asked to yield, its checkpoint written)."""
+        restored = self.restore()
+        if restored is not None:
+            trainer, checkpoint = restored
+            checkpoint_written = time.monotonic()
+            more = []
+            while len(more) < len(trainer.free_slots()) and (run := self.open_next()) is not None:
+                more.append(self.ask(run))
+            if more:
+                self.refill(trainer, more)
+        else:
+            first = []
+            while len(first) < self.slots and (run := self.open_next(block_first and not first)):
+                first.append(self.ask(run))
+            if not first:
+                return
+            trainer = SlotTrainer(
+                np.stack([r.request.theta for r in first]),
+                np.stack([r.request.omega for r in first]),
+                [r.request.seed for r in first],
+                self.config.env,
+                self.config.ddpg,
+                tags=[(r.p, r.run) for r in first],
+            )
+            checkpoint, checkpoint_written = None, time.monotonic()
+        last_tick, steps_at_tick = time.monotonic(), 0
+        steps = 0
+        yielding = self.should_yield is not None and self.checkpoint_seconds is not None
+        while trainer.busy.any():
+            steps += int(trainer.busy.sum())
+            refills: list[_Run] = []
+            ended = trainer.step()
+            for tag, result in ended:
+                run = self.active[tag]
+                optimum = local_optimum(result, self.config.env, self.config.ddpg)
+                run.driver.record(run.request, optimum, result.seconds)
+                save_step(self.out, run.p, run.run, run.driver.state.trials, optimum)
+                if run.driver.finished:
+                    del self.active[tag]
+                    run.lock.close()
+                    self.on_done(run_summary(run.p, run.run, run.driver.state))
+                    run = self.open_next()
+                    if run is None:
+                        continue
+                refills.append(self.ask(run))
+            if refills:
+                self.refill(trainer, refills)
+            elif not self.pending and not trainer.busy.all():
+                trainer.shrink()
+            now = time.monotonic()
+            due = (
+                self.checkpoint_seconds is not None
+                and now - checkpoint_written >= self.checkpoint_seconds
+            )
+            if due and trainer.busy.any():
+                checkpoint, _ = self.write_checkpoint(trainer, checkpoint)
+                checkpoint_written = now
+            if now - last_tick < self.tick_seconds:
+                continue
+            if self.on_tick is not None:
+                rate = (steps - steps_at_tick) / (now - last_tick)
+                self.on_tick(
+                    {
+                        "in_flight": int(trainer.busy.sum()),
+                        "pending": len(self.pending),
+                        "env_steps/s": f"{rate:,.0f}",
+                    }
+                )
+            last_tick, steps_at_tick = now, steps
+            if yielding and trainer.busy.any() and self.should_yield():
+                checkpoint, written = self.write_checkpoint(trainer, checkpoint)
+                if written:
+                    log.info(
+                        "%s: batch of %d searches yielded (checkpoint %s)",
+                        self.out,
+                        int(trainer.busy.sum()),
+                        checkpoint.name,
+                    )
+                    raise _Yielded
+                log.warning("%s: could not yield; its searches continue in this batch", self.out)
+                yielding = False  # without a checkpoint it would lose its searches
+        if checkpoint is not None:
+            remove_inflight(checkpoint)  # every run of the batch has ended
+
+    def run(self) -> bool:
+        """Train until every run has ended: True if the batch yielded first (its checkpoint
+        written), False once its runs have ended."""
+        try:
+            self.batch(block_first=False)
+            # runs another process held: now wait for them, one batch at a time
+            while self.deferred:
+                self.pending.extend(self.deferred)
+                self.deferred.clear()
+                self.batch(block_first=True)
+        except _Yielded:
+            return True
+        finally:
+            for run in self.active.values():
+                run.lock.close()
+        return False
+
+
+def run_lockstep(
+    out: str | Path,
+    config: Any,
+    jobs: Sequence[Job],
+    on_done: Callable[[dict[str, Any]], None],
+    slots: int,
+    wait: bool = False,
+    on_tick: Callable[[dict[str, Any]], None] | None = None,
+    tick_seconds: float = 5.0,
+    checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
+    should_yield: Callable[[], bool] | None = None,
+) -> bool:
+    """Run (or resume) the runs ``jobs`` of experiment ``config`` in ``out`` through one
+    lockstep batch of at most ``slots`` local searches. True when the batch yielded (below)
+    before its runs ended.
+
+    ``on_done(summary)`` is called as each run ends (the summary of
+    :func:`lonlib.experiment.running.run_summary`), and for a run another process holds, at once
+    with ``held_by`` naming the holder (unless ``wait``: then its lock is waited for).
+    ``on_tick(info)`` runs every ``tick_seconds`` for progress displays, with the searches
+    in flight, the runs still pending and the env steps per second of the batch since the
+    last tick. ``should_yield()`` is asked at each tick: when it says so, the batch writes
+    its in-flight checkpoint and stops, to be resumed (split, for example) by a new batch;
+    the runs it has not started stay pending, and nothing is lost.
+
+    Every ``checkpoint_seconds`` (``None``: never) the batch is written to an in-flight
+    checkpoint (:mod:`lonlib.experiment.checkpoints`), kept in step with the stored trials after
+    that;
+    a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
+    (it keeps the checkpoint's number of slots).
+    """
+    return LockstepBatch(
+        out,
+        config,
+        jobs,
+        on_done,
+        slots,
+        wait,
+        on_tick,
+        tick_seconds,
+        checkpoint_seconds,
+        should_yield,
+    ).run()
+
+
+def _restore(
+    checkpoint: InflightCheckpoint,
+    lock_and_open: Callable[[Job, bool], _Run],
+    config: Any,
+    jobs: set[Job],
+) -> tuple[SlotTrainer, list[_Run], list[Job]] | None:
+    """Lock and open the runs of ``checkpoint`` and load its batch: the trainer, the runs of
+    the slots that continue (locked) and those of the slots dropped because their runs went
+    on since the write (unlocked). Each of its runs must be one of ``jobs`` or have ended.
+    ``None`` (every lock released) if a run is held by another process or is someone else's
+    job, or the file cannot be read now or was trained with other settings (kept), or if no
+    slot continues or its files are refused (truncated, planted, another layout: removed,
+    stale)."""
+    runs: list[_Run] = []
+    stale = None
+    try:
+        for job in checkpoint.runs:
+            runs.append(lock_and_open(job, False))
+            if job not in jobs and not runs[-1].driver.finished:
+                return None
+        remove_leftovers(checkpoint.metadata_path, keep=checkpoint.data_path)
+        try:
+            stored = read_inflight(checkpoint)
+            check_settings(checkpoint, stored, config.env, config.ddpg)
+            trainer = stored.trainer()
+        except OtherSettings as error:  # kept for a session with those settings
+            log.warning("%s", error)
+            return None
+        except ValueError as error:  # truncated, planted, or not of this layout
+            stale = str(error)
+            return None
+        dropped = _slots_gone_on(checkpoint, trainer, runs)
+        if len(dropped) < len(runs):
+            trainer.drop([slot for slot in dropped.values() if slot is not None])
+            kept = [run for run in runs if (run.p, run.run) not in dropped]
+            runs = [run for run in runs if (run.p, run.run) in dropped]  # unlocked below
+            return trainer, kept, list(dropped)
+        stale = "every run went on since it was written"
+    except LockHeld:
+        pass
+    except CheckpointUnreadable as error:
+        log.warning("%s: in-flight checkpoint skipped (%s)", checkpoint.metadata_path, error)
+    finally:
+        for run in runs:
+            run.lock.close()
+        if stale is not None:
+            path = checkpoint.metadata_path
+            log.warning("%s: stale in-flight checkpoint removed (%s)", path, stale)
+            remove_inflight(path)
+    return None
+
+
+def _slots_gone_on(
+    checkpoint: InflightCheckpoint, trainer: SlotTrainer, runs: list[_Run]
+) -> dict[Job, int | None]:
+    """The runs (and their slots) whose stored trials or next search differ from what the
+    checkpoint's slot holds; every other run's next request is set (its slot's search)."""
+    slot_of = {tag: slot for slot, tag in enumerate(trainer.tags()) if trainer.busy[slot]}
+    gone: dict[Job, int | None] = {}
+    for run, trials in zip(runs, checkpoint.trials, strict=True):
+        job = (run.p, run.run)
+        slot = slot_of.get(job)
+        if slot is None or run.driver.finished or len(run.driver.state.trials) != trials:
+            gone[job] = slot
+            continue
+        run.request = run.driver.next_search()
+        search = trainer.searches[slot]
+        if not (
+            np.array_equal(search.theta, run.request.theta)
+            and np.array_equal(search.omega, run.request.omega)
+        ):
+            gone[job] = slot
+    return gone

@@ -1,0 +1,316 @@
+"""Experiments: configurations (:mod:`lonlib.storage.configs`) -> basin-hopping runs, executed in
+this process, in local worker processes, on Dask or in lockstep batches.
+
+An :class:`ExperimentConfig` expands to ``runs`` independent basin-hopping runs for each
+perturbation strength ``p``. Run ``(p, run)`` draws everything from a seed derived from
+``(experiment seed, p, run)``, so its result does not depend on where or in what order it
+runs. :func:`run_experiment` skips finished runs, continues interrupted ones after their
+last stored local search (see :mod:`lonlib.storage.store`) and executes the rest serially, in local
+worker processes, on a Dask cluster (:mod:`lonlib.experiment.executors`) or as lockstep batches
+(:mod:`lonlib.experiment.lockstep`); :mod:`lonlib.storage.manifest`
+records the configuration and each session.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import logging
+import warnings
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+from tqdm import tqdm
+
+from lonlib.ddpg.search_interface import ddpg_local_search
+from lonlib.ddpg.trainer import check_device
+from lonlib.experiment.checkpoints import (
+    checkpoint_lock_path,
+    remove_inflight,
+    scan_inflight,
+)
+from lonlib.experiment.executors import execute_runs, resolve_executor, session_executor
+from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_lockstep
+from lonlib.experiment.lockstep_workers import run_lockstep_processes
+from lonlib.experiment.runs import (  # noqa: F401  (re-exported: they lived here)
+    MANIFEST_LOCK,
+    RUN_LOCK,
+    experiment_plan,
+    hold_runs,
+    initial_parameters,
+    open_run,
+    run_lock_path,
+    run_summary,
+)
+from lonlib.storage.configs import (  # noqa: F401  (re-exported: configurations used to live here)
+    EXECUTION_ONLY_DDPG_FIELDS,
+    NAMED_CONFIGS,
+    QUICK_DDPG,
+    ExperimentConfig,
+    load_config,
+    named_config,
+)
+from lonlib.storage.lock import LockHeld, exclusive_lock
+from lonlib.storage.manifest import (
+    capability_change,
+    manifest_path,
+    sessions_with_other_result_path,
+    updated_manifest,
+)
+from lonlib.storage.provenance import session_provenance
+from lonlib.storage.result_path import RESULT_PATH_VERSION
+from lonlib.storage.status import experiment_status, run_status  # noqa: F401  (re-exported)
+from lonlib.storage.store import (
+    DataWriteError,
+    check_output_folder,
+    load_run_state,
+    read_experiment_trials,
+    remove_temporary_files,
+    save_step,
+    write_json,
+)
+from lonlib.util.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
+from lonlib.util.progress import progress_bar
+from lonlib.util.validation import check_range
+
+log = logging.getLogger(__name__)
+
+
+def run_one(
+    out: str | Path, config: ExperimentConfig, p: float, run: int, wait: bool = True
+) -> dict[str, Any]:
+    """Execute (or resume, or skip if finished) run ``(p, run)``, storing every local search.
+
+    Holds the run's lock throughout, so no other process writes the run at the same time.
+    If another process holds it: wait for it to finish or die, then continue from what it
+    stored (``wait``), or return at once with ``held_by`` naming the holder.
+
+    Returns a summary: p, run, local searches, best fitness, end reason, held_by (None
+    unless the run was left to its holder).
+    """
+    try:
+        with exclusive_lock(run_lock_path(Path(out), p, run), wait=wait):
+            return _run_locked(Path(out), config, p, run)
+    except LockHeld as held:
+        return {"p": p, "run": run, "held_by": held.holder}
+
+
+def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
+    driver = open_run(out, config, p, run)
+    for state, _, optimum in driver.steps(ddpg_local_search(config.env, config.ddpg)):
+        save_step(out, p, run, state.trials, optimum)
+    return run_summary(p, run, driver.state)
+
+
+# ---------------------------------------------------------------------------- experiments
+def pending_runs(config: ExperimentConfig, out: Path) -> list[tuple[float, int]]:
+    """Runs that are not finished yet (reads every stored run; corrupt files raise)."""
+    pending = []
+    for p in config.perturbations:
+        bh = config.basin_hopping(p)
+        for run in range(config.runs):
+            state = load_run_state(out, p, run, bh)
+            if state is None or not state.finished:
+                pending.append((p, run))
+    return pending
+
+
+def remove_finished_checkpoints(
+    out: Path, todo: list[tuple[float, int]], config: ExperimentConfig | None = None
+) -> None:
+    """Remove the in-flight checkpoints (:mod:`lonlib.experiment.checkpoints`) all of whose runs
+    have
+    ended since (they went on without them: nothing in them can be resumed), and those
+    whose metadata is refused (truncated, planted, with ``config`` listing a run that is not
+    one of the experiment's, :func:`experiment_plan`: their runs continue from their stored
+    trials). A checkpoint whose runs another process holds is left to it."""
+    checkpoints, refused = scan_inflight(
+        out, None if config is None else experiment_plan(out, config)
+    )
+    for meta, reason in refused:
+        with hold_runs(out, [], [checkpoint_lock_path(meta)]) as held:
+            if held:
+                log.warning("%s: refused in-flight checkpoint removed (%s)", meta, reason)
+                remove_inflight(meta)
+    for checkpoint in checkpoints:
+        if not set(checkpoint.runs).isdisjoint(todo):
+            continue
+        with hold_runs(out, checkpoint.runs, [checkpoint_lock_path(checkpoint)]) as held:
+            if held:
+                log.warning("%s: in-flight checkpoint of ended runs removed", checkpoint.name)
+                remove_inflight(checkpoint.metadata_path)
+
+
+def refuse_mixed_result_paths(out: Path) -> None:
+    """Refuse to sample more into an experiment whose stored sessions ran another
+    result-path version (:mod:`lonlib.storage.result_path`): no experiment mixes two versions of a
+    result-changing path. Analysing it (``lonlib analyse``, ``lonlib verify``) still works."""
+    others = sessions_with_other_result_path(out)
+    if others:
+        found = sorted({str(s["result_path_version"]) for s in others})
+        raise ValueError(
+            f"{out} was sampled by result-path version(s) {found} ('None': before versions "
+            f"were recorded) and this lonlib computes version {RESULT_PATH_VERSION}: its "
+            "runs cannot be continued or extended without mixing two versions of the results. "
+            "Analyse it as it is (lonlib analyse / lonlib verify), or sample the experiment "
+            "again into a new folder (--out)"
+        )
+
+
+def run_experiment(
+    config: ExperimentConfig,
+    out: str | Path,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: bool = True,
+    max_attempts: int = 3,
+    executor: str | None = None,
+    slots: int | None = None,
+    checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
+) -> pd.DataFrame:
+    """Run every unfinished run of ``config`` into ``out``; return all trials.
+
+    ``executor`` (default: Dask when a ``scheduler`` is given, else the configuration's)
+    picks where runs execute:
+    ``"serial"`` in this process; ``"pool"``: ``workers`` local processes (one torch thread
+    each); ``"dask"``: on ``scheduler``, a Dask scheduler address or ``"dask-local"`` for a
+    LocalCluster of ``workers`` processes; ``"lockstep"``: the local searches of up to
+    ``slots`` runs trained as one batch (:mod:`lonlib.experiment.lockstep`; on the device
+    ``config.ddpg.device``), in this process, or with ``workers`` > 1 one batch per worker
+    process, each over its share of the runs; it writes its batch to an in-flight
+    checkpoint every ``checkpoint_seconds`` (``None``: never; :mod:`lonlib.experiment.checkpoints`)
+    and
+    resumes from it. ``"auto"``: Dask if a scheduler is given,
+    else a pool for ``workers`` > 1, else serial. Every executor gives a run the same
+    trials. A run whose worker dies is retried (up to ``max_attempts``) and resumes from its
+    last stored local search.
+
+    Before any compute: ``out`` must exist or be creatable in an existing folder and accept
+    files (:class:`lonlib.storage.store.DataWriteError` otherwise; on Dask, every worker checks it
+    too), and its stored runs must be readable. A run that another process is writing is
+    left to it and waited for once everything else is done; if its holder dies, this
+    process continues the run from what the holder stored.
+    """
+    check_range("workers", workers, 1, 4096)
+    check_range("max_attempts", max_attempts, 1, 1000)
+    requested = session_executor(executor, config.executor, scheduler)
+    kind = resolve_executor(requested, workers, scheduler)
+    slots = config.slots if slots is None else slots
+    check_range("slots", slots, 1, 100_000)
+    if checkpoint_seconds is not None:
+        check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
+    config = dataclasses.replace(config, executor=kind, slots=slots)  # what this session uses
+    check_device(config.ddpg.device)
+    if kind == "lockstep":
+        check_lockstep(config.ddpg, slots)
+    out = Path(out)
+    check_output_folder(out)
+    capability = torch_cpu_capability()
+    with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
+        remove_temporary_files(out, manifest_path(out).name)
+        manifest = updated_manifest(config, out, session_provenance(capability))
+        todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
+        if todo and manifest_path(out).exists():
+            refuse_mixed_result_paths(out)
+        remove_finished_checkpoints(out, todo, config)
+        if todo or not manifest_path(out).exists():  # a finished experiment stays untouched
+            write_json(manifest_path(out), manifest)
+    if todo and config.ddpg.device == "cpu":
+        warn_about_cpu_kernels(manifest, capability)
+    total = len(config.perturbations) * config.runs
+    bar = progress_bar(
+        total=total,
+        initial=total - len(todo),
+        desc=f"{config.name} runs",
+        disable=not progress,
+        unit="run",
+    )
+    held: dict[tuple[float, int], str] = {}
+
+    def on_done(summary: dict[str, Any]) -> None:
+        if summary["held_by"] is None:
+            _refresh(bar, out, done=1)
+        else:
+            held[summary["p"], summary["run"]] = summary["held_by"]
+
+    def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
+        if kind == "lockstep":
+            run_lockstep_processes(
+                out,
+                config,
+                jobs,
+                on_done,
+                slots,
+                workers,
+                wait,
+                lambda info: _refresh(bar, out, batch=info),
+                checkpoint_seconds=checkpoint_seconds,
+            )
+            return
+        execute_runs(
+            partial(run_one, out, config, wait=wait),
+            jobs,
+            on_done,
+            workers=1 if kind == "serial" else workers,
+            scheduler=scheduler if kind == "dask" else None,
+            max_attempts=max_attempts,
+            key_prefix=config.name,
+            on_tick=lambda: _refresh(bar, out),
+            worker_check=partial(check_worker_sees_folder, str(out)),
+        )
+
+    try:
+        if todo:
+            execute(todo, wait=False)
+        if held:
+            names = "; ".join(f"p={p} run {run}: {who}" for (p, run), who in held.items())
+            log.warning("%s: waiting for runs another process is writing (%s)", out, names)
+            jobs = list(held)
+            held.clear()
+            execute(jobs, wait=True)
+        if todo:  # a batch that ended without resuming a checkpoint of its runs left it
+            remove_finished_checkpoints(out, pending_runs(config, out), config)
+    finally:
+        bar.close()
+    return read_experiment_trials(out)
+
+
+def warn_about_cpu_kernels(manifest: dict[str, Any], capability: str) -> None:
+    """Warn (:class:`lonlib.util.cpu_kernels.CpuKernelWarning`, and in the log) when this
+    session's torch CPU kernels are not the ones lonlib pins, or not its earlier sessions'."""
+    for message in (unpinned_message(capability), capability_change(manifest, capability)):
+        if message:
+            log.warning(message)
+            warnings.warn(message, CpuKernelWarning, stacklevel=3)
+
+
+def check_worker_sees_folder(out: str) -> None:
+    """On an executor's worker, before any compute: the experiment folder the client set up
+    is there (a worker without the shared file system would write elsewhere) and accepts
+    files. Raises :class:`lonlib.storage.store.DataWriteError` naming the folder."""
+    if not manifest_path(Path(out)).exists():
+        raise DataWriteError(
+            errno.ENOENT,
+            f"cannot write {out}: this worker does not see the experiment's manifest there "
+            "(every worker needs the same folder, on a shared file system)",
+        )
+    check_output_folder(Path(out))
+
+
+def _refresh(bar: tqdm, out: Path, done: int = 0, batch: dict | None = None) -> None:
+    """Advance the progress bar and show local searches and the best fitness so far (and,
+    from the lockstep executor, its batch: searches in flight, env steps per second)."""
+    if bar.disable:
+        return
+    bar.update(done)
+    trials = read_experiment_trials(out)
+    postfix = dict(batch or {})
+    if len(trials):
+        postfix.update(local_searches=len(trials), best=f"{trials['fitness'].max():.3f}")
+    if postfix:
+        bar.set_postfix(postfix)
+
+
+status = experiment_status  # the name ``lonlib status`` and the notebooks call

@@ -1,0 +1,81 @@
+"""One basin-hopping run of an experiment: its random start, its lock, its resumed driver, its
+summary, and the plan of an experiment's runs (what every executor needs, below them)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lonlib.search.algorithm import BasinHoppingRun, RunState
+from lonlib.storage.configs import ExperimentConfig
+from lonlib.storage.inflight import Plan
+from lonlib.storage.layout import MANIFEST_LOCK, RUN_LOCK  # noqa: F401  (MANIFEST_LOCK: re-exported)
+from lonlib.storage.lock import LockHeld, exclusive_lock
+from lonlib.storage.store import load_run_state, read_manifest, remove_temporary_files, run_dir
+from lonlib.task.policy import actor_spec, critic_spec
+
+
+def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np.ndarray, ...]:
+    """Algorithm 2's random initial Actor and Critic for run ``(p, run)``."""
+    rng = np.random.default_rng([config.run_seed(p, run), 1])
+    n = config.env.n_carts
+    return actor_spec(n).initial(rng), critic_spec(n).initial(rng)
+
+
+def run_lock_path(out: Path, p: float, run: int) -> Path:
+    """The lock file held by the one process writing run ``(p, run)``."""
+    return run_dir(Path(out), p, run) / RUN_LOCK
+
+
+@contextmanager
+def hold_runs(
+    out: Path, runs: Sequence[tuple[float, int]], also: Sequence[Path] = ()
+) -> Iterator[bool]:
+    """Hold the locks of ``runs`` (and the lock files ``also``) for the ``with`` block,
+    yielding True; yield False (holding none) if another process holds one of them."""
+    with ExitStack() as locks:
+        try:
+            for path in [*(run_lock_path(out, p, run) for p, run in runs), *also]:
+                locks.enter_context(exclusive_lock(path, wait=False))
+        except LockHeld:
+            locks.close()
+            yield False
+            return
+        yield True
+
+
+def open_run(out: Path, config: ExperimentConfig, p: float, run: int) -> BasinHoppingRun:
+    """Algorithm 2's driver of run ``(p, run)``, resumed from what is stored (call with the
+    run's lock held: a holder before us may have stored more than the caller saw)."""
+    remove_temporary_files(run_dir(out, p, run))
+    bh = config.basin_hopping(p)
+    state = load_run_state(out, p, run, bh)
+    return BasinHoppingRun(initial_parameters(config, p, run), bh, config.run_seed(p, run), state)
+
+
+def run_summary(p: float, run: int, state: RunState) -> dict[str, Any]:
+    """What an executor reports for a finished run."""
+    return {
+        "p": p,
+        "run": run,
+        "local_searches": len(state.trials),
+        "best_fitness": state.incumbent.fitness if state.incumbent else float("nan"),
+        "end_reason": state.end_reason,
+        "held_by": None,
+    }
+
+
+def experiment_plan(out: str | Path, config: ExperimentConfig) -> Plan:
+    """The runs of the experiment in ``out`` (:data:`lonlib.experiment.checkpoints.Plan`): those of
+    ``config`` and of the configuration its manifest holds (a session may run fewer p values
+    or runs than earlier ones did)."""
+    perturbations, runs = set(config.perturbations), config.runs
+    try:
+        stored = ExperimentConfig.from_mapping(read_manifest(Path(out))["config"])
+    except Exception:  # none yet, or unreadable (sampling refuses to start then)
+        return perturbations, runs
+    return perturbations | set(stored.perturbations), max(runs, stored.runs)

@@ -1,0 +1,160 @@
+"""The experiment manifest: what ``data/<experiment>/manifest.json`` records and checks.
+
+It holds the configuration (merged over every session that added runs or p values), the
+lonlib version, the git commit, package versions, the host and one entry per session. A
+folder holding an experiment with a different configuration is refused.
+
+Each session also records where its results came from (:func:`lonlib.storage.provenance.
+session_provenance`): the lock's hash, the CPU kernels (numpy's dispatch targets, torch's
+CPU capability) and the result-path version (:mod:`lonlib.storage.result_path`).
+:func:`sessions_with_other_result_path` lists the sessions whose numbers came from another
+result path; :func:`capability_change` says when a session computes with other torch CPU
+kernels than the sessions before it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import platform
+import subprocess
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from lonlib.storage.result_path import RESULT_PATH_VERSION
+from lonlib.storage.store import read_json
+
+if TYPE_CHECKING:
+    from lonlib.storage.configs import ExperimentConfig
+
+PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
+
+
+def manifest_path(out: Path) -> Path:
+    """The manifest of the experiment folder ``out``."""
+    return Path(out) / "manifest.json"
+
+
+def _git_commit() -> str | None:
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).parent,
+            timeout=5,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def _versions() -> dict[str, str | None]:
+    out = {"python": platform.python_version()}
+    for name in ("lonlib", *PACKAGES):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def updated_manifest(
+    config: ExperimentConfig, out: Path, provenance: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """The manifest ``out`` should hold for ``config`` (new, or the stored one with this
+    session added); refuses a folder holding another experiment. The new session records
+    ``provenance`` (:func:`lonlib.storage.provenance.session_provenance`). Writes nothing."""
+    path = manifest_path(out)
+    now = datetime.now(UTC).isoformat(timespec="seconds")
+    if path.exists():
+        manifest = read_json(path)
+        stored = type(config).from_mapping(manifest["config"])
+        if stored.comparable() != config.comparable():
+            changed = sorted(
+                k for k in config.comparable() if stored.comparable()[k] != config.comparable()[k]
+            )
+            raise ValueError(
+                f"{out} holds an experiment with a different configuration ({changed} differ); "
+                "choose another output folder or use the stored configuration"
+            )
+        runs = max(stored.runs, config.runs)
+        perturbations = tuple(dict.fromkeys((*stored.perturbations, *config.perturbations)))
+        merged = dataclasses.replace(stored, runs=runs, perturbations=perturbations)
+        manifest["config"] = merged.to_dict()
+        manifest.setdefault("sessions", []).append(
+            {
+                "started": now,
+                "versions": _versions(),
+                "git_commit": _git_commit(),
+                # where DDPG ran this session: not configuration (results do not depend on it)
+                "execution": {
+                    "device": config.ddpg.device,
+                    "threads": config.ddpg.threads,
+                    "executor": config.executor,
+                    "slots": config.slots,
+                },
+                **(provenance or {}),
+            }
+        )
+    else:
+        manifest = {
+            "experiment": config.name,
+            "created": now,
+            "config": config.to_dict(),
+            "lonlib_version": _versions()["lonlib"],
+            "git_commit": _git_commit(),
+            "versions": _versions(),
+            "host": platform.node(),
+            "sessions": [{"started": now, **(provenance or {})}],
+        }
+    return manifest
+
+
+def _manifest(experiment: str | Path | Mapping[str, Any]) -> Mapping[str, Any]:
+    """A manifest given as itself or by its experiment folder."""
+    if isinstance(experiment, Mapping):
+        return experiment
+    return read_json(manifest_path(Path(experiment)))
+
+
+def sessions_with_other_result_path(
+    experiment: str | Path | Mapping[str, Any],
+) -> list[dict[str, Any]]:
+    """The sessions of ``experiment`` (a folder or its manifest) whose results came from
+    another result path than this code's (:data:`lonlib.storage.result_path.RESULT_PATH_VERSION`):
+    one entry per such session with its ``index``, ``started`` and
+    ``result_path_version`` (None for sessions recorded before versions were kept)."""
+    return [
+        {
+            "index": index,
+            "started": session.get("started"),
+            "result_path_version": session.get("result_path_version"),
+        }
+        for index, session in enumerate(_manifest(experiment).get("sessions", []))
+        if session.get("result_path_version") != RESULT_PATH_VERSION
+    ]
+
+
+def capability_change(manifest: Mapping[str, Any], capability: str | None) -> str | None:
+    """A message when the manifest's earlier sessions recorded other torch CPU kernels
+    than ``capability`` (their trials then differ in the last bits from what this session
+    would compute for them); None when they agree or recorded none."""
+    sessions = list(manifest.get("sessions", []))[:-1]  # the last one is this session
+    before = sorted(
+        {
+            str(session["cpu"]["torch"])
+            for session in sessions
+            if isinstance(session.get("cpu"), Mapping) and session["cpu"].get("torch")
+        }
+    )
+    if not before or before == [capability]:
+        return None
+    return (
+        f"earlier sessions of this experiment computed with torch's {'/'.join(before)} CPU "
+        f"kernels, this one with {capability}: runs resumed here will not be bit for bit "
+        "what they would have been there (leave ATEN_CPU_CAPABILITY unset and import "
+        "lonlib before using torch to get the AVX2 kernels lonlib pins)"
+    )
