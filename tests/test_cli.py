@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 
 from lonlib.cli import build_parser, main
-from lonlib.experiment import load_config, run_experiment
-from lonlib.store import DataWriteError
+from lonlib.experiment.running import load_config, run_experiment
+from lonlib.storage.store import DataWriteError
 
 READERS = ["status", "lon", "analyse", "record", "verify"]
 # What reStructuredText or Sphinx markup looks like in a help text.
@@ -72,7 +72,7 @@ def test_every_verb_refuses_an_empty_folder_in_one_style(verb, tmp_path, capsys)
 
 
 def test_a_scheduler_chooses_the_dask_executor_over_the_configurations(tmp_path, capsys):
-    from lonlib.executors import session_executor
+    from lonlib.experiment.executors import session_executor
 
     assert load_config("quick").executor == "lockstep"
     assert session_executor(None, "lockstep", "dask-local") == "dask"

@@ -41,7 +41,7 @@ def test_boxplot_has_one_box_per_p_and_labels():
 
 
 def test_figures_are_byte_stable_for_the_same_data():
-    from lonlib.plots import png_bytes
+    from lonlib.util.figures import png_bytes
 
     table = __import__("pandas").concat(
         [HAND, trials([(0, 0, -1, 0.3, True), (0, 1, 0, 0.4, True)], p=1e-3)]
@@ -70,7 +70,7 @@ def test_lon_3d_draws_every_node_with_fitness_as_height(tmp_path):
 
 
 def test_histograms_mark_detected_and_paper_peaks():
-    from lonlib.plots import INK, LABEL_COLOURS
+    from lonlib.analysis.plots import INK, LABEL_COLOURS
 
     rng = np.random.default_rng(0)
     values = np.concatenate([rng.normal(peak, 0.01, 100) for peak in PAPER_PEAKS])
