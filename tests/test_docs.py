@@ -18,16 +18,16 @@ import torch
 import yaml
 
 import lonlib.ddpg
-from lonlib.calibration.report import DRIFT_HEADER, README_BEGIN, README_END
 from lonlib.analysis.claims import peaks_beside_paper
 from lonlib.analysis.claims_report import README_BEGIN as CLAIMS_BEGIN
 from lonlib.analysis.claims_report import README_END as CLAIMS_END
 from lonlib.analysis.claims_report import claims_markdown, splice_readme
-from lonlib.cli import build_parser, main
-from lonlib.util.readme_tables import splice_generated
-from lonlib.storage.store import read_experiment_trials
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import splice_summary, summary_markdown
+from lonlib.calibration.report import DRIFT_HEADER, README_BEGIN, README_END
+from lonlib.cli import build_parser, main
+from lonlib.storage.store import read_experiment_trials
+from lonlib.util.readme_tables import splice_generated
 
 ROOT = Path(__file__).parents[1]
 README = ROOT / "README.md"
