@@ -30,6 +30,7 @@ def run_calibration(
     workers: int = 1,
     progress: bool = True,
     checkpoint_seconds: float = 600.0,
+    check_steps: int = 1000,
 ) -> CalibrationResult:
     """Run every unfinished cell of ``config`` into ``out`` and write the tables and figure.
 
@@ -37,7 +38,8 @@ def run_calibration(
     than unfinished cells are not started); cells that continue from another cell's
     searches (``continue_from``) run after the others. Finished cells are read back, not
     recomputed; a cell in flight continues from its checkpoint (written every
-    ``checkpoint_seconds``; :func:`lonlib.calibration.study.run_cell`). A folder holding
+    ``checkpoint_seconds``, looked at every ``check_steps`` env steps;
+    :func:`lonlib.calibration.study.run_cell`). A folder holding
     cells computed with other settings is refused before any compute. ``progress``: a bar
     of the cells and, from each cell, a line a minute (env steps per search, env steps/s).
     """
@@ -48,7 +50,7 @@ def run_calibration(
     for cell in todo:  # a source stored before the study kept its Critics: refused now
         if cell.continue_from and config.cell(cell.continue_from) not in todo:
             cell_starts(cell, config, out)
-    (out / ".gitignore").parent.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / ".gitignore", GITIGNORE.encode())
     write_json(
         out / "calibration.json",
@@ -62,7 +64,11 @@ def run_calibration(
         disable=not progress,
     )
     try:
-        options = {"checkpoint_seconds": checkpoint_seconds, "progress": progress}
+        options = {
+            "checkpoint_seconds": checkpoint_seconds,
+            "progress": progress,
+            "check_steps": check_steps,
+        }
         waves = [
             [cell for cell in todo if not cell.continue_from],
             [cell for cell in todo if cell.continue_from],

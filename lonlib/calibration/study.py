@@ -627,8 +627,8 @@ def run_cell(
     its history, the described judged policies and the greedy rollout of its returned
     Actor), and the returned Actors ``[seeds, P]`` and Critics (:class:`CellParameters`).
     With ``out`` (the study folder) the batch is checkpointed every ``checkpoint_seconds``
-    (checked every
-    ``check_steps`` env steps; :class:`lonlib.calibration.inflight.CellCheckpoint`) and a
+    (checked every ``check_steps`` env steps;
+    :class:`lonlib.calibration.inflight.CellCheckpoint`) and a
     checkpoint found there is continued: the record is the same as an uninterrupted run's
     (``seconds`` aside). ``progress`` prints a line per check at most every minute (env
     steps per search, env steps/s, best greedy fitness so far).
@@ -783,12 +783,18 @@ def run_and_store_cell(
     config: CalibrationConfig,
     checkpoint_seconds: float = 600.0,
     progress: bool = False,
+    check_steps: int = 1000,
 ) -> str:
     """Run one cell (continuing its in-flight checkpoint in ``out``, if any) and write it
     atomically: the best Actors and Critics first (``theta``, ``omega``), then the record;
     then remove its checkpoint."""
     record, (thetas, omegas) = run_cell(
-        cell, config, out, checkpoint_seconds=checkpoint_seconds, progress=progress
+        cell,
+        config,
+        out,
+        checkpoint_seconds=checkpoint_seconds,
+        progress=progress,
+        check_steps=check_steps,
     )
     record_path, actors_path = cell_paths(Path(out), cell)
 
