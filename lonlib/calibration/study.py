@@ -86,6 +86,7 @@ RECORD_FORMAT = 2
 BALANCING_FITNESS = 0.9
 # The labels of an optimum with at least one rod balanced (lonlib.task.behaviour.label).
 ROD_UP_LABELS = ("balancing", "one rod up")
+PROGRESS_SECONDS = 300.0  # at most one progress line per cell this often
 AGGREGATIONS = ("all", "mean")  # fitness_mode: every rod upright per step, the upright share
 
 CELL_COLUMNS = [
@@ -630,7 +631,7 @@ def run_cell(
     (checked every ``check_steps`` env steps;
     :class:`lonlib.calibration.inflight.CellCheckpoint`) and a
     checkpoint found there is continued: the record is the same as an uninterrupted run's
-    (``seconds`` aside). ``progress`` prints a line per check at most every minute (env
+    (``seconds`` aside). ``progress`` prints a line at most every :data:`PROGRESS_SECONDS` (env
     steps per search, env steps/s, best greedy fitness so far).
     """
     check_range("checkpoint_seconds", checkpoint_seconds, 0.0)
@@ -667,7 +668,7 @@ def run_cell(
             seconds = trained_seconds + time.perf_counter() - start
             checkpoint.save(trainer, settings, {"judged": log.state(), "seconds": seconds})
             saved = now
-        if progress and now - shown >= 60.0:
+        if progress and now - shown >= PROGRESS_SECONDS:
             rate = config.seeds * (steps - steps_at_start) / max(now - clock, 1e-9)
             best = max(r.fitness for r in trainer.results())
             print(
