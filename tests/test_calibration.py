@@ -150,7 +150,9 @@ def test_a_killed_study_resumes_and_recomputes_only_the_missing_cell(
     (copy / "cells" / f"{lost.name}.json").unlink()  # killed before this cell committed
     computed = []
     real = calibration.run_cell
-    monkeypatch.setattr(calibration, "run_cell", lambda c, k: computed.append(c) or real(c, k))
+    monkeypatch.setattr(
+        calibration, "run_cell", lambda c, k, *a, **o: computed.append(c) or real(c, k, *a, **o)
+    )
     result = run_calibration(config, copy, progress=False)
     assert computed == [lost]
     pd.testing.assert_frame_equal(

@@ -9,24 +9,49 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lonlib.calibration.report import CalibrationResult, write_outputs
-from lonlib.calibration.study import CalibrationConfig, read_cell, run_and_store_cell
-from lonlib.storage.store import write_json
+from lonlib.calibration.study import (
+    CalibrationConfig,
+    cell_starts,
+    read_cell,
+    run_and_store_cell,
+)
+from lonlib.storage.store import atomic_write, write_json
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
 
+# What a study folder keeps out of git (data/studies/ is committed): the Actors and Critics
+# and the in-flight checkpoints; the records, tables and figures are small.
+GITIGNORE = "*.npz\ninflight/\n.*.tmp\n"
+
 
 def run_calibration(
-    config: CalibrationConfig, out: str | Path, workers: int = 1, progress: bool = True
+    config: CalibrationConfig,
+    out: str | Path,
+    workers: int = 1,
+    progress: bool = True,
+    checkpoint_seconds: float = 600.0,
+    check_steps: int = 1000,
 ) -> CalibrationResult:
     """Run every unfinished cell of ``config`` into ``out`` and write the tables and figure.
 
     ``workers`` > 1 runs cells in that many processes (one torch thread each; more workers
-    than unfinished cells are not started). Finished cells are read back, not recomputed;
-    a folder holding cells computed with other settings is refused before any compute.
+    than unfinished cells are not started); cells that continue from another cell's
+    searches (``continue_from``) run after the others. Finished cells are read back, not
+    recomputed; a cell in flight continues from its checkpoint (written every
+    ``checkpoint_seconds``, looked at every ``check_steps`` env steps;
+    :func:`lonlib.calibration.study.run_cell`). A folder holding
+    cells computed with other settings is refused before any compute. ``progress``: a bar
+    of the cells and, from each cell, a line a minute (env steps per search, env steps/s).
     """
     check_range("workers", workers, 1, 4096)
+    check_range("checkpoint_seconds", checkpoint_seconds, 0.0)
     out = Path(out)
     todo = [cell for cell in config.cells if read_cell(out, cell, config) is None]
+    for cell in todo:  # a source stored before the study kept its Critics: refused now
+        if cell.continue_from and config.cell(cell.continue_from) not in todo:
+            cell_starts(cell, config, out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write(out / ".gitignore", GITIGNORE.encode())
     write_json(
         out / "calibration.json",
         {"config": config.to_dict(), "updated": datetime.now(UTC).isoformat(timespec="seconds")},
@@ -39,14 +64,27 @@ def run_calibration(
         disable=not progress,
     )
     try:
-        if workers <= 1 or len(todo) <= 1:
-            for cell in todo:
-                run_and_store_cell(out, cell, config)
-                bar.update(1)
-        else:
+        options = {
+            "checkpoint_seconds": checkpoint_seconds,
+            "progress": progress,
+            "check_steps": check_steps,
+        }
+        waves = [
+            [cell for cell in todo if not cell.continue_from],
+            [cell for cell in todo if cell.continue_from],
+        ]
+        for wave in waves:
+            if workers <= 1 or len(wave) <= 1:
+                for cell in wave:
+                    bar.set_postfix_str(cell.name)
+                    run_and_store_cell(out, cell, config, **options)
+                    bar.update(1)
+                continue
             context = multiprocessing.get_context("spawn")
-            with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=context) as pool:
-                futures = [pool.submit(run_and_store_cell, out, cell, config) for cell in todo]
+            with cf.ProcessPoolExecutor(min(workers, len(wave)), mp_context=context) as pool:
+                futures = [
+                    pool.submit(run_and_store_cell, out, cell, config, **options) for cell in wave
+                ]
                 for future in cf.as_completed(futures):
                     bar.set_postfix_str(future.result())
                     bar.update(1)

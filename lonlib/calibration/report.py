@@ -20,6 +20,7 @@ import pandas as pd
 import seaborn as sns
 
 from lonlib.calibration.study import (
+    AGGREGATIONS,
     BALANCING_FITNESS,
     CELL_COLUMNS,
     CalibrationConfig,
@@ -41,6 +42,8 @@ def search_table(records: list[dict[str, Any]]) -> pd.DataFrame:
             row = {"cell": record["name"], **record["cell"]}
             # only the velocity motor has a time constant, only the others a gain
             row["motor_gain" if row["motor"] == "velocity" else "motor_tau"] = np.nan
+            if "continue_from" in row:  # empty (none) reads back from a CSV as NaN
+                row["continue_from"] = row["continue_from"] or np.nan
             row.update({k: v for k, v in search.items() if not k.startswith("history_")})
             # from the history, so that records stored before NaN-safe summaries read right
             row.update(
@@ -48,9 +51,164 @@ def search_table(records: list[dict[str, Any]]) -> pd.DataFrame:
             )
             rows.append(row)
     table = pd.DataFrame(rows)
-    for column in ("first_nonzero_steps", "first_balancing_steps"):
-        table[column] = table[column].astype("float64")
+    for column in ("first_nonzero_steps", "first_balancing_steps", *JUDGED_STEPS):
+        if column in table:
+            table[column] = table[column].astype("float64")
     return table
+
+
+# The per-search columns of the learner-side study (lonlib.calibration.study.judged_summary).
+JUDGED_STEPS = tuple(
+    f"first_{event}_{a}_steps" for a in AGGREGATIONS for event in ("090", "balancing", "rod_up")
+)
+STUDY_COLUMNS = [
+    "cell",
+    "reward",
+    "exploring_starts",
+    "continue_from",
+    "searches",
+    *(
+        f"{column}_{a}"
+        for a in AGGREGATIONS
+        for column in (
+            "best",
+            "median_best",
+            "reached_090",
+            "first_090_steps_median",
+            "balancing",
+            "first_balancing_steps_median",
+            "rod_up",
+            "first_rod_up_steps_median",
+        )
+    ),
+]
+
+
+def has_judged(searches: pd.DataFrame) -> bool:
+    """Do the searches carry the learner-side study's columns (records stored since)?"""
+    return "best_all" in searches and bool(searches["best_all"].notna().any())
+
+
+def study_table(searches: pd.DataFrame) -> pd.DataFrame:
+    """One row per cell of the learner-side study (columns :data:`STUDY_COLUMNS`): per
+    aggregation (``all``: every rod upright per step, the fitness; ``mean``: the upright
+    share) the best and median best fitness of the cell's searches, and how many searches
+    reached an optimum of at least :data:`BALANCING_FITNESS`, one labelled ``balancing``,
+    one with a rod up (``one rod up`` or ``balancing``), with the median env steps to it."""
+    rows = []
+    for name, group in searches.groupby("cell", sort=False):
+        first = group.iloc[0]
+        row: dict[str, Any] = {
+            "cell": name,
+            "reward": first["reward"],
+            "exploring_starts": bool(first.get("exploring_starts", False)),
+            "continue_from": first.get("continue_from", "")
+            if pd.notna(first.get("continue_from", ""))
+            else "",
+            "searches": len(group),
+        }
+        for a in AGGREGATIONS:
+            row[f"best_{a}"] = float(group[f"best_{a}"].max())
+            row[f"median_best_{a}"] = float(group[f"best_{a}"].median())
+            for event, count in (
+                ("090", "reached_090"),
+                ("balancing", "balancing"),
+                ("rod_up", "rod_up"),
+            ):
+                steps = group[f"first_{event}_{a}_steps"].dropna()
+                row[f"{count}_{a}"] = len(steps)
+                row[f"first_{event}_steps_median_{a}"] = steps.median() if len(steps) else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows, columns=STUDY_COLUMNS)
+
+
+def study_markdown(table: pd.DataFrame) -> str:
+    """:func:`study_table` as Markdown: per cell and aggregation the best fitness (median
+    best) and, for each event, ``searches reaching it, median env steps to it``."""
+
+    def event(row: pd.Series, count: str, steps: str) -> str:
+        if not row[count]:
+            return f"0 of {row['searches']}"
+        return f"{row[count]} of {row['searches']}, {_kilo(row[steps])}"
+
+    head = "| cell | reward | training starts | start |"
+    rule = "|---|---|---|---|"
+    for a in AGGREGATIONS:
+        name = "all rods upright" if a == "all" else "per-pendulum mean"
+        head += (
+            f" best, {name} (median) | ≥ {BALANCING_FITNESS:g} ({a}) | balancing ({a}) "
+            f"| a rod up ({a}) |"
+        )
+        rule += "---|---|---|---|"
+    lines = [head, rule]
+    for _, row in table.iterrows():
+        start = f"best of {row['continue_from']}" if row["continue_from"] else "initial"
+        line = (
+            f"| {row['cell']} | {row['reward']} "
+            f"| {'exploring' if row['exploring_starts'] else 'fixed'} | {start} |"
+        )
+        for a in AGGREGATIONS:
+            line += (
+                f" {row[f'best_{a}']:.3f} ({row[f'median_best_{a}']:.3f}) "
+                f"| {event(row, f'reached_090_{a}', f'first_090_steps_median_{a}')} "
+                f"| {event(row, f'balancing_{a}', f'first_balancing_steps_median_{a}')} "
+                f"| {event(row, f'rod_up_{a}', f'first_rod_up_steps_median_{a}')} |"
+            )
+        lines.append(line)
+    return "\n".join(lines) + "\n"
+
+
+def best_so_far_table(records: list[dict[str, Any]]) -> pd.DataFrame:
+    """The best greedy fitness so far of every search under both aggregations, at each
+    judged policy that raised it and at the search's end: columns ``cell``, ``seed_index``,
+    ``aggregation``, ``env_steps``, ``best`` (small: improvements only)."""
+    rows = []
+    for record in records:
+        for search in record["searches"]:
+            steps = search.get("history_judged_env_steps")
+            if not steps:
+                continue
+            for a in AGGREGATIONS:
+                best = -np.inf
+                for step, value in zip(steps, search[f"history_fitness_{a}"], strict=True):
+                    if value > best:
+                        best = value
+                        rows.append((record["name"], search["seed_index"], a, step, value))
+                rows.append((record["name"], search["seed_index"], a, search["env_steps"], best))
+    columns = ["cell", "seed_index", "aggregation", "env_steps", "best"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def study_figure(best: pd.DataFrame) -> plt.Figure:
+    """Best greedy fitness so far against env steps, one panel per aggregation, one line
+    per search, one colour per cell (from :func:`best_so_far_table`); drawn with seaborn
+    under the figures' one theme, the balancing threshold as a dotted line."""
+    cells = list(dict.fromkeys(best["cell"]))
+    palette = dict(zip(cells, sns.color_palette("tab10", max(len(cells), 2)), strict=False))
+    with themed():
+        fig, axes = plt.subplots(1, len(AGGREGATIONS), figsize=(13, 4.5), sharey=True)
+        for ax, a in zip(axes, AGGREGATIONS, strict=True):
+            part = best[best["aggregation"] == a]
+            if len(part):
+                sns.lineplot(
+                    data=part, x="env_steps", y="best", hue="cell", hue_order=cells,
+                    units="seed_index", estimator=None, palette=palette,
+                    drawstyle="steps-post", linewidth=1.2, alpha=0.8,
+                    legend=ax is axes[-1], ax=ax,
+                )  # fmt: skip
+            ax.axhline(BALANCING_FITNESS, color="grey", lw=0.8, ls=":")
+            ax.set_title("all rods upright (the fitness)" if a == "all" else "per-pendulum mean")
+            ax.set_xlabel("environment steps")
+            ax.xaxis.set_major_formatter(plt.FuncFormatter(lambda v, _: f"{v / 1000:g}k"))
+            ax.set_ylim(-0.02, 1.02)
+        axes[0].set_ylabel("best greedy fitness so far")
+        if axes[-1].get_legend() is not None:
+            sns.move_legend(
+                axes[-1], "upper left", bbox_to_anchor=(1.02, 1.0), frameon=False, fontsize=7
+            )
+        fig.suptitle("Learner-side study: best greedy fitness so far per search")
+        fig.tight_layout()
+    return fig
 
 
 def _per_rod(row: pd.Series, prefix: str, fmt: str) -> str:
@@ -155,8 +313,10 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
             else f"{row['motor']} × {row['motor_gain']:g}"
         )
         end = "survives" if row["best_end_reason"] == "step_limit" else row["best_end_reason"]
+        kinds = [k for k in ("explore", "continue") if f"_{k}" in str(row["cell"])]
+        reward = row["reward"] + (f" ({', '.join(kinds)})" if kinds else "")
         lines.append(
-            f"| {motor} | {row['integrator']} | {row['reward']} "
+            f"| {motor} | {row['integrator']} | {reward} "
             f"| {row['left_zero']} of {row['searches']} | {steps(row)} "
             f"| {row['balanced']} of {row['searches']}"
             + (f", {steps(row, 'balancing')} " if row["balanced"] else " ")
@@ -197,8 +357,20 @@ def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResu
     files = [out / name for name in ("calibration.csv", "searches.csv", "drift.csv")]
     for table, path in zip((cells, searches, drift), files, strict=True):
         atomic_write(path, table.to_csv(index=False).encode())
+    markdown = calibration_markdown(cells, drift)
+    if has_judged(searches):  # the learner-side study's table, figure and curves
+        study = study_table(searches)
+        best = best_so_far_table(records)
+        for table, name in ((study, "study.csv"), (best, "best_so_far.csv")):
+            files.append(out / name)
+            atomic_write(files[-1], table.to_csv(index=False).encode())
+        markdown += "\n" + study_markdown(study)
+        files.append(out / "study.png")
+        curves = study_figure(best)
+        atomic_write(files[-1], png_bytes(curves))
+        plt.close(curves)
     files.append(out / "calibration.md")
-    atomic_write(files[-1], calibration_markdown(cells, drift).encode())
+    atomic_write(files[-1], markdown.encode())
     png = out / "calibration.png"
     atomic_write(png, png_bytes(figure))
     return CalibrationResult(cells, searches, drift, figure, [*files, png])

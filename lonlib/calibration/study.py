@@ -2,8 +2,8 @@
 
 A study is a grid of **cells**; a cell fixes the motor model (force, acceleration or
 velocity), its gain or time constant, the integrator and the DDPG reward. For every cell,
-``seeds`` agents train with lonlib's batched DDPG (:func:`lonlib.ddpg.trainer.local_search_batch`,
-one call per cell) for exactly ``max_steps`` environment steps each (no early stop, so cells
+``seeds`` agents train with lonlib's batched DDPG (one :class:`lonlib.ddpg.trainer.SlotTrainer`
+per cell) for exactly ``max_steps`` environment steps each (no early stop, so cells
 compare at equal budget). Seed ``i`` starts from the same Actor and Critic and draws the same
 random streams in every cell (common random numbers), so cells differ only by their physics.
 
@@ -29,6 +29,17 @@ writes each finished cell atomically to ``<out>/cells/<cell>.json`` (its Actors 
 its report (:mod:`lonlib.calibration.report`): ``calibration.csv`` (one row per cell),
 ``searches.csv`` (one row per search), ``drift.csv``, ``calibration.md`` and
 ``calibration.png``.
+
+**Learner-side cells** (the two-cart study, ``configs/study-two-cart.yaml``): a cell may
+also set ``exploring_starts`` (training episodes start from
+:class:`StartSpread`, the greedy evaluations keep Algorithm 1's start) and ``continue_from``
+(its searches start from the best Actor and Critic that search ``i`` of an earlier cell
+stored, with fresh replay buffers, Adam state and random streams: a basin-hopping chain's
+situation); the ``height-product`` reward is a :class:`lonlib.task.pendulum.PendulumConfig`
+reward. Every judged policy of a search is also described (:func:`judged_summary`): its
+nominal episode's fitness under both aggregations and its behaviour label. A cell's
+searches train with in-flight checkpoints (:mod:`lonlib.calibration.inflight`): a killed
+study resumes mid-cell and gives the same cells as an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -36,17 +47,19 @@ from __future__ import annotations
 import dataclasses
 import io
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
 
-from lonlib.ddpg.trainer import DDPGConfig, local_search_batch
+from lonlib.calibration.inflight import CellCheckpoint
+from lonlib.ddpg.trainer import DDPGConfig, LocalSearchResult, SlotTrainer
 from lonlib.storage.store import atomic_write, read_json, write_json
-from lonlib.task.behaviour import describe_actors, label
+from lonlib.task.behaviour import LABELS, describe_actors, label
 from lonlib.task.pendulum import PendulumConfig, total_energy, wrap_angle
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.task.rollout import Scoring, run_policy
@@ -61,7 +74,7 @@ from lonlib.util.validation import (
 
 MOTORS = ("force", "acceleration", "velocity")
 INTEGRATORS = ("euler", "semi-implicit")
-REWARDS = ("height", "slow-height", "upright")
+REWARDS = ("height", "slow-height", "height-product", "upright")
 CELL_PHYSICS = ("motor", "integrator", "motor_gain", "motor_tau", "reward")
 # Version of what a stored cell's searches hold; part of the settings, so that cells stored
 # before the one rollout and behaviour descriptor (per-cart ``cart_range_<i>``, the study's
@@ -71,6 +84,10 @@ RECORD_FORMAT = 2
 # included (a spinning rod is upright about half the time: no optimum of the default grid, all
 # spinning or ending early, scores above 0.51); the study reports the env steps to the first.
 BALANCING_FITNESS = 0.9
+# The labels of an optimum with at least one rod balanced (lonlib.task.behaviour.label).
+ROD_UP_LABELS = ("balancing", "one rod up")
+PROGRESS_SECONDS = 300.0  # at most one progress line per cell this often
+AGGREGATIONS = ("all", "mean")  # fitness_mode: every rod upright per step, the upright share
 
 CELL_COLUMNS = [
     "cell",
@@ -102,6 +119,38 @@ CELL_COLUMNS = [
 
 
 @dataclass(frozen=True)
+class StartSpread:
+    """Where the training episodes of a cell with ``exploring_starts`` start: the nominal
+    start (carts at rest, evenly spaced, rods at ``initial_angle``) plus U[-w, w] on each
+    coordinate of every cart, drawn per episode from the search's start-noise stream. The
+    default spreads the angle over the whole circle and the angular velocity over
+    +-pi rad/s (half a turn per second: slow enough to be caught near upright), carts at
+    rest at their nominal places. Training only: the greedy evaluations (the fitness)
+    start from Algorithm 1's fixed start."""
+
+    position: float = 0.0
+    """Half-width w of the cart position noise [m], in [0, 0.4] (carts stay apart)."""
+    velocity: float = 0.0
+    """Half-width of the cart velocity noise [m/s], in [0, 2]."""
+    angle: float = math.pi
+    """Half-width of the rod angle noise [rad], in [0, pi] (pi: the whole circle)."""
+    angular_velocity: float = math.pi
+    """Half-width of the rod angular velocity noise [rad/s], in [0, 5 pi]."""
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        check_range("starts.position", self.position, 0.0, 0.4)
+        check_range("starts.velocity", self.velocity, 0.0, 2.0)
+        check_range("starts.angle", self.angle, 0.0, math.pi)
+        check_range("starts.angular_velocity", self.angular_velocity, 0.0, 5 * math.pi)
+
+    @property
+    def half_widths(self) -> tuple[float, float, float, float]:
+        """``(x, x_dot, phi, phi_dot)`` half-widths, the order of the simulator's state."""
+        return (self.position, self.velocity, self.angle, self.angular_velocity)
+
+
+@dataclass(frozen=True)
 class Cell:
     """One physics setting of the grid. ``motor_gain`` matters for the force [N per unit of
     command] and acceleration [m/s^2 per unit] motors, ``motor_tau`` [s] for the velocity
@@ -112,6 +161,12 @@ class Cell:
     motor_gain: float = 1.0
     motor_tau: float = 0.02
     reward: str = "height"
+    exploring_starts: bool = False
+    """Training episodes start from the study's :class:`StartSpread` (name suffix
+    ``_explore``)."""
+    continue_from: str = ""
+    """Name of an earlier cell of the grid whose searches' best Actors and Critics this
+    cell's searches start from (name suffix ``_continue``); empty: the study's starts."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -123,13 +178,15 @@ class Cell:
 
     @property
     def name(self) -> str:
-        """File-safe, readable name, e.g. ``velocity-tau0.02_semi-implicit_height``."""
+        """File-safe, readable name, e.g. ``velocity-tau0.02_semi-implicit_height``
+        (``_explore``, ``_continue`` appended for those kinds)."""
         motor = (
             f"velocity-tau{self.motor_tau:g}"
             if self.motor == "velocity"
             else f"{self.motor}-gain{self.motor_gain:g}"
         )
-        return f"{motor}_{self.integrator}_{self.reward}"
+        kinds = "_explore" * self.exploring_starts + "_continue" * bool(self.continue_from)
+        return f"{motor}_{self.integrator}_{self.reward}{kinds}"
 
     def env(self, base: PendulumConfig) -> PendulumConfig:
         """``base`` with this cell's physics (validated by :class:`PendulumConfig`)."""
@@ -202,6 +259,8 @@ class CalibrationConfig:
     """The other DDPG hyperparameters."""
     drift_steps: int = 2000
     """Steps of the motor-off energy-drift check of each integrator."""
+    starts: StartSpread = field(default_factory=StartSpread)
+    """Where the training episodes of cells with ``exploring_starts`` start."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -218,6 +277,13 @@ class CalibrationConfig:
         check_range("drift_steps", self.drift_steps, 1, 100_000)
         for cell in self.cells:  # every cell's physics must be valid before any compute
             cell.env(self.env)
+        for index, cell in enumerate(self.cells):
+            earlier = names[:index]
+            if cell.continue_from and cell.continue_from not in earlier:
+                raise ValueError(
+                    f"cells[{index}].continue_from must name an earlier cell of the grid "
+                    f"(one of {earlier}), got {cell.continue_from!r}"
+                )
         _ = self.hp  # validates the combined DDPG settings
 
     @property
@@ -239,10 +305,26 @@ class CalibrationConfig:
         out["cells"] = [dataclasses.asdict(cell) for cell in self.cells]
         return out
 
+    def cell(self, name: str) -> Cell:
+        """The cell of the grid named ``name``."""
+        return {cell.name: cell for cell in self.cells}[name]
+
+    def cell_settings(self, cell: Cell) -> dict[str, Any]:
+        """Everything one stored cell depends on besides the cell itself: :meth:`settings`,
+        plus the start spread of an exploring cell and the source cell of a continuing one
+        (so that cells of the former kinds keep the settings they were stored with)."""
+        out = self.settings()
+        if cell.exploring_starts:
+            out["starts"] = dataclasses.asdict(self.starts)
+        if cell.continue_from:
+            source = self.cell(cell.continue_from)
+            out["source"] = {"cell": dataclasses.asdict(source), **self.cell_settings(source)}
+        return out
+
     def settings(self) -> dict[str, Any]:
         """Everything a stored cell depends on besides the cell itself."""
         out = self.to_dict()
-        for key in ("name", "cells", "drift_steps"):
+        for key in ("name", "cells", "drift_steps", "starts"):
             out.pop(key)
         # Every cell replaces these, so a change of the package's physics defaults must not
         # invalidate stored cells.
@@ -263,6 +345,10 @@ class CalibrationConfig:
             raise ValueError(f"unknown calibration key(s) {unknown}; allowed: {sorted(known)}")
         env = {**base.pop("env"), **(values.pop("env", None) or {})}
         ddpg = {**base.pop("ddpg"), **(values.pop("ddpg", None) or {})}
+        starts = {**base.pop("starts"), **(values.pop("starts", None) or {})}
+        unknown = sorted(set(starts) - {f.name for f in dataclasses.fields(StartSpread)})
+        if unknown:
+            raise ValueError(f"unknown starts key(s) {unknown}")
         unknown = sorted(set(ddpg) - {f.name for f in dataclasses.fields(DDPGConfig)})
         if unknown:
             raise ValueError(f"unknown ddpg key(s) {unknown}")
@@ -277,6 +363,7 @@ class CalibrationConfig:
             cells=tuple(cells),
             env=PendulumConfig.from_mapping(env),
             ddpg=DDPGConfig(**ddpg),
+            starts=StartSpread(**starts),
             **merged,
         )
 
@@ -440,30 +527,177 @@ def seed_streams(config: CalibrationConfig, index: int) -> tuple[np.ndarray, np.
     return actor_spec(n).initial(rng), critic_spec(n).initial(rng), ddpg_seed
 
 
-def run_cell(cell: Cell, config: CalibrationConfig) -> tuple[dict[str, Any], np.ndarray]:
-    """Train ``config.seeds`` agents on one cell (one batched DDPG call) and describe them.
+def continue_seed(config: CalibrationConfig, index: int) -> int:
+    """DDPG seed of search ``index`` of a ``continue_from`` cell: fresh streams, as a
+    basin-hopping trial's local search draws its own."""
+    return int(np.random.SeedSequence([config.seed, index, 2]).generate_state(1)[0])
+
+
+class JudgedLog:
+    """Every judged policy of a cell's searches, described: the trainer's ``on_judged``.
+
+    Per search (the trainer's tags are the seed indices) four lists in judge order (episode
+    order): the env steps at the episode's end, the nominal episode's fitness under both
+    aggregations (``fitness_all``, ``fitness_mean``) and the behaviour label's index in
+    :data:`lonlib.task.behaviour.LABELS`. One batched :func:`describe_actors` per judged
+    batch (nominal start of the DDPG scoring plus one perturbed start that is not used).
+    """
+
+    def __init__(self, env: PendulumConfig, scoring: Scoring, searches: int) -> None:
+        self.env = env
+        self.scoring = dataclasses.replace(scoring, starts=1)
+        self.rows: dict[int, dict[str, list]] = {
+            i: {"env_steps": [], "fitness_all": [], "fitness_mean": [], "label": []}
+            for i in range(searches)
+        }
+
+    def __call__(self, judged: list[tuple[Any, Any, np.ndarray]]) -> None:
+        """Describe a batch of ``(tag, EpisodeRecord, flat Actor)`` and log it."""
+        descriptors = describe_actors(np.stack([j[2] for j in judged]), self.env, self.scoring)
+        for (tag, record, _), d in zip(judged, descriptors, strict=True):
+            rows = self.rows[int(tag)]
+            rows["env_steps"].append(int(record.env_steps))
+            rows["fitness_all"].append(d.fitness_all)
+            rows["fitness_mean"].append(d.fitness_mean)
+            rows["label"].append(LABELS.index(label(d)))
+
+    def state(self) -> dict[str, Any]:
+        """Plain data (JSON): what :meth:`restore` reads back."""
+        return {str(i): rows for i, rows in self.rows.items()}
+
+    def restore(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state`'s data."""
+        if set(state) != {str(i) for i in self.rows}:
+            raise ValueError(f"judged log of searches {sorted(state)}, expected {len(self.rows)}")
+        self.rows = {int(i): {k: list(v) for k, v in rows.items()} for i, rows in state.items()}
+
+
+def cell_starts(
+    cell: Cell, config: CalibrationConfig, out: str | Path | None
+) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Start Actors ``[seeds, P]``, Critics and DDPG seeds of a cell's searches: the
+    study's (:func:`seed_streams`), or for a ``continue_from`` cell the best Actors and
+    Critics its source cell stored in ``out`` with fresh seeds (:func:`continue_seed`).
+    ValueError, naming the field, if the source cell has not stored them."""
+    if not cell.continue_from:
+        streams = [seed_streams(config, i) for i in range(config.seeds)]
+        return (
+            np.stack([s[0] for s in streams]),
+            np.stack([s[1] for s in streams]),
+            [s[2] for s in streams],
+        )
+    source = config.cell(cell.continue_from)
+    path = cell_paths(Path(out or "."), source)[1]
+    if out is None or read_cell(Path(out), source, config) is None or not path.exists():
+        raise ValueError(
+            f"continue_from: the source cell {source.name!r} has not stored its searches in "
+            f"{out}; it must finish first (it is an earlier cell of the grid)"
+        )
+    with np.load(path) as data:
+        if "omega" not in data:
+            raise ValueError(
+                f"continue_from: {path} holds no Critics (stored before the study kept them); "
+                f"recompute the cell {source.name!r}"
+            )
+        thetas, omegas = data["theta"], data["omega"]
+    if len(thetas) != config.seeds:
+        raise ValueError(f"continue_from: {path} holds {len(thetas)} searches, not {config.seeds}")
+    return thetas, omegas, [continue_seed(config, i) for i in range(config.seeds)]
+
+
+class CellParameters(NamedTuple):
+    """The best Actors and Critics of a cell's searches (float32, one row per search)."""
+
+    theta: np.ndarray
+    omega: np.ndarray
+
+
+def run_cell(
+    cell: Cell,
+    config: CalibrationConfig,
+    out: str | Path | None = None,
+    *,
+    checkpoint_seconds: float = 600.0,
+    check_steps: int = 1000,
+    progress: bool = False,
+) -> tuple[dict[str, Any], CellParameters]:
+    """Train ``config.seeds`` agents on one cell (one batch of lockstep searches) and
+    describe them.
 
     Returns the cell record (JSON-ready: the cell, the settings, one entry per search with
-    its history and greedy rollout) and the returned Actors ``[seeds, P]``.
+    its history, the described judged policies and the greedy rollout of its returned
+    Actor), and the returned Actors ``[seeds, P]`` and Critics (:class:`CellParameters`).
+    With ``out`` (the study folder) the batch is checkpointed every ``checkpoint_seconds``
+    (checked every ``check_steps`` env steps;
+    :class:`lonlib.calibration.inflight.CellCheckpoint`) and a
+    checkpoint found there is continued: the record is the same as an uninterrupted run's
+    (``seconds`` aside). ``progress`` prints a line at most every :data:`PROGRESS_SECONDS` (env
+    steps per search, env steps/s, best greedy fitness so far).
     """
+    check_range("checkpoint_seconds", checkpoint_seconds, 0.0)
+    check_range("check_steps", check_steps, 1)
     start = time.perf_counter()
     env = cell.env(config.env)
-    streams = [seed_streams(config, i) for i in range(config.seeds)]
-    thetas = np.stack([s[0] for s in streams])
-    omegas = np.stack([s[1] for s in streams])
-    results = local_search_batch(thetas, omegas, env, config.hp, [s[2] for s in streams])
+    hp = config.hp
+    settings = {"cell": dataclasses.asdict(cell), **config.cell_settings(cell)}
+    log = JudgedLog(env, hp.scoring, config.seeds)
+    checkpoint = CellCheckpoint(out, cell.name) if out is not None else None
+    restored = checkpoint.load(settings) if checkpoint else None
+    spread = config.starts.half_widths if cell.exploring_starts else None
+    if restored is None:
+        thetas, omegas, seeds = cell_starts(cell, config, out)
+        trainer = SlotTrainer(thetas, omegas, seeds, env, hp, start_spread=spread)
+        trained_seconds = 0.0
+    else:
+        trainer, state = restored
+        trainer.start_spread = spread
+        log.restore(state["judged"])
+        trained_seconds = float(state["seconds"])
+    trainer.on_judged = log
+    results: list[LocalSearchResult | None] = [None] * config.seeds
+    steps_at_start, clock, shown = int(trainer.steps.max()), time.monotonic(), 0.0
+    saved = clock
+    while trainer.busy.any():
+        for tag, result in trainer.step():
+            results[tag] = result
+        steps = int(trainer.steps.max())
+        if steps % check_steps or not trainer.busy.all():
+            continue
+        now = time.monotonic()
+        if checkpoint is not None and now - saved >= checkpoint_seconds:
+            seconds = trained_seconds + time.perf_counter() - start
+            checkpoint.save(trainer, settings, {"judged": log.state(), "seconds": seconds})
+            saved = now
+        if progress and now - shown >= PROGRESS_SECONDS:
+            rate = config.seeds * (steps - steps_at_start) / max(now - clock, 1e-9)
+            best = max(r.fitness for r in trainer.results())
+            print(
+                f"{time.strftime('%H:%M:%S')} {cell.name}: {steps}/{config.max_steps} env steps "
+                f"per search, {rate:.0f} env steps/s, best greedy fitness {best:.3f}",
+                file=sys.stderr,
+                flush=True,
+            )
+            shown = now
     best_thetas = np.stack([r.theta for r in results])
-    rollouts = greedy_rollout(best_thetas, env, config.hp.scoring)
+    best_omegas = np.stack([r.omega for r in results])
+    rollouts = greedy_rollout(best_thetas, env, hp.scoring)
     searches = []
     for index, (result, rollout) in enumerate(
         zip(results, rollouts.to_dict("records"), strict=True)
     ):
         steps = [h.env_steps for h in result.history]
         fitness = [h.greedy_fitness for h in result.history]
+        judged = log.rows[index]
         searches.append(
             {
                 "seed_index": index,
                 **history_summary(steps, fitness),
+                **judged_summary(
+                    judged["env_steps"],
+                    judged["fitness_all"],
+                    judged["fitness_mean"],
+                    [LABELS[i] for i in judged["label"]],
+                ),
                 "returned_fitness": result.fitness,
                 "start_fitness": result.start_fitness,
                 "env_steps": result.env_steps,
@@ -471,16 +705,56 @@ def run_cell(cell: Cell, config: CalibrationConfig) -> tuple[dict[str, Any], np.
                 **rollout,
                 "history_env_steps": steps,
                 "history_greedy_fitness": fitness,
+                "history_judged_env_steps": judged["env_steps"],
+                "history_fitness_all": judged["fitness_all"],
+                "history_fitness_mean": judged["fitness_mean"],
+                "history_label": judged["label"],
             }
         )
     record = {
         "cell": dataclasses.asdict(cell),
         "name": cell.name,
-        "settings": config.settings(),
-        "seconds": time.perf_counter() - start,
+        "settings": config.cell_settings(cell),
+        "labels": list(LABELS),
+        "seconds": trained_seconds + time.perf_counter() - start,
         "searches": searches,
     }
-    return record, best_thetas
+    return record, CellParameters(best_thetas, best_omegas)
+
+
+def judged_summary(
+    steps: list[int], fitness_all: list[float], fitness_mean: list[float], labels: list[str]
+) -> dict[str, Any]:
+    """When a search's optima got good, under both aggregations, from its judged policies
+    (env steps at their episodes' ends, fitness under ``all`` and ``mean``, label).
+
+    Under aggregation ``a`` the search's optimum changes whenever a judged policy scores
+    strictly more under ``a`` than every earlier one. Per ``a``: ``best_<a>`` (0 if none was
+    judged), ``first_090_<a>_steps`` (the first optimum scoring at least
+    :data:`BALANCING_FITNESS`), ``first_balancing_<a>_steps`` (the first labelled
+    ``balancing``) and ``first_rod_up_<a>_steps`` (the first with a rod balanced: labelled
+    ``one rod up`` or ``balancing``, :data:`ROD_UP_LABELS`); None where none did.
+    """
+    out: dict[str, Any] = {}
+    for name, fitness in zip(AGGREGATIONS, (fitness_all, fitness_mean), strict=True):
+        best = -math.inf
+        firsts: dict[str, int | None] = {"090": None, "balancing": None, "rod_up": None}
+        for step, value, kind in zip(steps, fitness, labels, strict=True):
+            if not value > best:
+                continue
+            best = value
+            hits = {
+                "090": value >= BALANCING_FITNESS,
+                "balancing": kind == "balancing",
+                "rod_up": kind in ROD_UP_LABELS,
+            }
+            for key, hit in hits.items():
+                if hit and firsts[key] is None:
+                    firsts[key] = int(step)
+        out[f"best_{name}"] = max(best, 0.0)
+        for key, value in firsts.items():
+            out[f"first_{key}_{name}_steps"] = value
+    return out
 
 
 def history_summary(steps: list[int], fitness: list[float]) -> dict[str, Any]:
@@ -504,15 +778,32 @@ def cell_paths(out: Path, cell: Cell) -> tuple[Path, Path]:
     return folder / f"{cell.name}.json", folder / f"{cell.name}.npz"
 
 
-def run_and_store_cell(out: str | Path, cell: Cell, config: CalibrationConfig) -> str:
-    """Run one cell and write it atomically: the Actors first, then the record."""
-    record, thetas = run_cell(cell, config)
+def run_and_store_cell(
+    out: str | Path,
+    cell: Cell,
+    config: CalibrationConfig,
+    checkpoint_seconds: float = 600.0,
+    progress: bool = False,
+    check_steps: int = 1000,
+) -> str:
+    """Run one cell (continuing its in-flight checkpoint in ``out``, if any) and write it
+    atomically: the best Actors and Critics first (``theta``, ``omega``), then the record;
+    then remove its checkpoint."""
+    record, (thetas, omegas) = run_cell(
+        cell,
+        config,
+        out,
+        checkpoint_seconds=checkpoint_seconds,
+        progress=progress,
+        check_steps=check_steps,
+    )
     record_path, actors_path = cell_paths(Path(out), cell)
 
     buffer = io.BytesIO()
-    np.savez_compressed(buffer, theta=thetas.astype(np.float32))
+    np.savez_compressed(buffer, theta=thetas.astype(np.float32), omega=omegas.astype(np.float32))
     atomic_write(actors_path, buffer.getvalue())
     write_json(record_path, record)
+    CellCheckpoint(out, cell.name).remove()
     return cell.name
 
 
@@ -523,7 +814,7 @@ def read_cell(out: Path, cell: Cell, config: CalibrationConfig) -> dict[str, Any
     if not path.exists():
         return None
     record = read_json(path)
-    if record.get("settings") != json_roundtrip(config.settings()):
+    if record.get("settings") != json_roundtrip(config.cell_settings(cell)):
         raise ValueError(
             f"{path} was computed with other settings than this study's; "
             "use another output folder or the stored settings"
@@ -545,9 +836,12 @@ __all__ = [
     "DEFAULT_CELLS",
     "CalibrationConfig",
     "Cell",
+    "CellParameters",
+    "StartSpread",
     "greedy_rollout",
     "grid",
     "integrator_drift",
+    "judged_summary",
     "load_calibration",
     "named_calibration",
     "run_cell",

@@ -254,6 +254,14 @@ class SlotTrainer:
     A slot in its warm-up acts uniformly at random and is not updated: the batched update
     runs over every slot, so a slot's learner state is restored to its start parameters
     when its warm-up ends if the batch touched it meanwhile (one copy per search).
+
+    Two optional public attributes, neither part of :meth:`to_checkpoint` (a caller that
+    sets them sets them again on the restored batch): ``start_spread`` (four half-widths for
+    x, x_dot, phi, phi_dot; constructor argument) makes every **training** episode start
+    from the nominal state plus U[-w, w] per coordinate, drawn from the slot's start-noise
+    stream, instead of ``initial_noise`` (exploring starts; the greedy evaluations keep the
+    scoring's starts); ``on_judged`` (a callable) receives, after every batched greedy
+    evaluation, the list of ``(tag, EpisodeRecord, flat Actor)`` it judged, in episode order.
     """
 
     def __init__(
@@ -264,6 +272,7 @@ class SlotTrainer:
         env_config: PendulumConfig,
         hp: DDPGConfig,
         tags: Sequence[Any] | None = None,
+        start_spread: Sequence[float] | None = None,
     ) -> None:
         k = len(seeds)
         if k < 1:
@@ -283,6 +292,8 @@ class SlotTrainer:
         # ``judge_batch`` of them (or before a search they concern may stop).
         self.pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]] = []
         self.judge_batch = min(k, JUDGE_BATCH)
+        self.start_spread = start_spread
+        self.on_judged = None
         self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
 
     def _configure(self, env_config: PendulumConfig, hp: DDPGConfig, k: int, device: str) -> None:
@@ -458,8 +469,10 @@ class SlotTrainer:
         """Reset the masked environments, each with start noise from its own stream (the
         episode number is the counter), and observe."""
         level = self.env_config.initial_noise
+        if self.start_spread is not None:
+            level = np.asarray(self.start_spread, dtype=np.float64).reshape(4, 1, 1)
         noise = None
-        if level > 0:
+        if np.any(level > 0):
             u = self.streams.uniform(START_NOISE, self.episodes, 4 * self.n).cpu().numpy()
             noise = level * (2.0 * u[mask].reshape(-1, 4, self.n).transpose(1, 0, 2) - 1.0)
         self.sim.reset(mask, noise)
@@ -530,6 +543,10 @@ class SlotTrainer:
                 search.result.fitness = score[0]
                 search.result.theta, search.result.omega = theta.copy(), omega.copy()
                 self.last_improvement[slot_of[id(search)]] = record.env_steps
+        if self.on_judged is not None:
+            self.on_judged(
+                [(search.tag, record, theta) for search, record, theta, _ in self.pending]
+            )
         self.pending = []
 
     def _stop(self, stop: np.ndarray, stale: np.ndarray) -> list[tuple[Any, LocalSearchResult]]:
@@ -637,6 +654,7 @@ class SlotTrainer:
         # JUDGE_BATCH is the most the constructor sets (fewer slots: as many), and a step
         # leaves fewer evaluations queued than that
         trainer.judge_batch = plain_int(plain["judge_batch"], "trainer.judge_batch", 1, JUDGE_BATCH)
+        trainer.start_spread, trainer.on_judged = None, None
         if len(trainer.pending) >= trainer.judge_batch:
             raise StateLayoutError("trainer.pending: more queued than a step leaves")
         reader.finish()

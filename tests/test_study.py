@@ -1,0 +1,290 @@
+"""The learner-side study (issue 31): the height-product reward, exploring starts, continue
+from best, the judged-policy summary, validation, and kill-and-resume of a cell in flight."""
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import lonlib.calibration.inflight as inflight
+import lonlib.calibration.study as study
+from lonlib.calibration import load_calibration, named_calibration, run_calibration
+from lonlib.calibration.study import CalibrationConfig, Cell, StartSpread, judged_summary
+from lonlib.ddpg.trainer import SlotTrainer, greedy_scores
+from lonlib.task.pendulum import CoupledPendulums, PendulumConfig
+from lonlib.task.policy import actor_spec, critic_spec
+
+TINY = named_calibration("tiny")
+BASE = TINY.cells[0]
+
+
+def tiny_study(*cells: Cell) -> CalibrationConfig:
+    """The tiny grid (one cart, 400 env steps per search) with ``cells``."""
+    return dataclasses.replace(TINY, name="tiny-study", cells=cells)
+
+
+# ------------------------------------------------------------------------ the reward
+@pytest.mark.parametrize("reward", ["height", "height-product"])
+def test_height_product_reward_is_the_product_of_the_rods_heights(reward):
+    cfg = PendulumConfig(n_carts=3, reward=reward, gravity=1e-9, hinge_friction=0.0)
+    sim = CoupledPendulums(cfg, 2)
+    angles = np.array([[0.0, math.pi / 2, 2.0], [0.3, 0.0, 0.0]])
+    sim.phi[:] = angles
+    out = sim.step(np.full((2, 3), 0.5))  # no force, (almost) no gravity: the rods stay put
+    heights = 0.5 * (1.0 + np.cos(angles))
+    expected = heights.prod(axis=1) if reward == "height-product" else heights.mean(axis=1)
+    np.testing.assert_allclose(out.reward, expected, atol=1e-9)
+
+
+def test_one_rod_up_earns_half_of_what_both_up_do_under_the_product():
+    cfg = PendulumConfig(n_carts=2, reward="height-product", gravity=1e-9)
+    sim = CoupledPendulums(cfg, 3)
+    sim.phi[:] = np.array([[0.0, 0.0], [0.0, math.pi / 2], [0.0, math.pi]])
+    reward = sim.step(np.full((3, 2), 0.5)).reward
+    np.testing.assert_allclose(reward, [1.0, 0.5, 0.0], atol=1e-9)
+
+
+def test_unknown_reward_is_refused_naming_the_field_and_choices():
+    with pytest.raises(ValueError, match="reward.*height-product"):
+        Cell(reward="product")
+    with pytest.raises(ValueError, match="reward"):
+        PendulumConfig(reward="product")
+
+
+# ------------------------------------------------------------------ exploring starts
+def test_start_spread_refuses_negative_or_too_wide_half_widths_by_name():
+    with pytest.raises(ValueError, match=r"starts\.angle"):
+        StartSpread(angle=-0.1)
+    with pytest.raises(ValueError, match=r"starts\.angular_velocity"):
+        StartSpread(angular_velocity=-1.0)
+    with pytest.raises(ValueError, match=r"starts\.position"):
+        StartSpread(position=1.0)
+    with pytest.raises(ValueError, match=r"unknown starts key"):
+        CalibrationConfig.from_mapping({"base": "tiny", "starts": {"spread": 1.0}})
+    with pytest.raises(ValueError, match=r"starts\.angle"):
+        CalibrationConfig.from_mapping({"base": "tiny", "starts": {"angle": -1.0}})
+
+
+def trainer(spread, seeds=(1, 2, 3)):
+    env = PendulumConfig(n_carts=2, steps=60)
+    rng = np.random.default_rng(0)
+    k = len(seeds)
+    thetas = np.stack([actor_spec(2).initial(rng) for _ in range(k)])
+    omegas = np.stack([critic_spec(2).initial(rng) for _ in range(k)])
+    hp = dataclasses.replace(TINY.hp, batch_size=32)
+    return SlotTrainer(thetas, omegas, list(seeds), env, hp, start_spread=spread), thetas, env, hp
+
+
+def test_exploring_starts_spread_the_training_starts_but_not_the_greedy_evaluation():
+    fixed, thetas, env, hp = trainer(None)
+    spread = StartSpread(angle=1.0, angular_velocity=2.0).half_widths
+    exploring, *_ = trainer(spread)
+    assert (fixed.sim.phi == math.pi).all() and (fixed.sim.phi_dot == 0).all()
+    offset = np.angle(np.exp(1j * (exploring.sim.phi - math.pi)))
+    assert 0 < np.abs(offset).max() <= 1.0 and len(np.unique(offset)) == offset.size
+    assert 0 < np.abs(exploring.sim.phi_dot).max() <= 2.0
+    assert (exploring.sim.x == fixed.sim.x).all() and (exploring.sim.x_dot == 0).all()
+    # the start's greedy fitness is Algorithm 1 from the fixed start in both
+    starts = [s.result.start_fitness for s in exploring.searches]
+    assert starts == [s.result.start_fitness for s in fixed.searches]
+    assert starts == list(greedy_scores(thetas, env, hp.scoring)[0])
+
+
+def test_an_exploring_cell_scores_its_optima_from_the_fixed_start():
+    config = tiny_study(BASE, dataclasses.replace(BASE, exploring_starts=True))
+    _, (fixed, _) = study.run_cell(config.cells[0], config)
+    explore, (thetas, _) = study.run_cell(config.cells[1], config)
+    for a, b in zip(fixed, thetas, strict=True):  # other training episodes, other Actors
+        assert not np.array_equal(a, b)
+    fitness, _ = greedy_scores(thetas, config.cells[1].env(config.env), config.hp.scoring)
+    for search, f in zip(explore["searches"], fitness, strict=True):
+        assert search["returned_fitness"] == f == search["rollout_fitness"]
+        # every judged policy was scored from the fixed start too (all = the fitness)
+        judged = [x for x in search["history_greedy_fitness"] if not math.isnan(x)]
+        assert judged == search["history_fitness_all"]
+
+
+# ------------------------------------------------------------------- continue from best
+def test_continue_from_a_cell_missing_from_the_grid_is_refused_before_compute():
+    with pytest.raises(ValueError, match=r"cells\[0\]\.continue_from.*earlier cell"):
+        tiny_study(dataclasses.replace(BASE, continue_from=BASE.name))
+    with pytest.raises(ValueError, match=r"cells\[1\]\.continue_from"):
+        tiny_study(BASE, dataclasses.replace(BASE, continue_from="velocity-nope"))
+
+
+def test_a_continue_cell_starts_from_the_stored_best_actors_and_critics(tmp_path, monkeypatch):
+    config = tiny_study(BASE, dataclasses.replace(BASE, continue_from=BASE.name))
+    starts = []
+    real = SlotTrainer.__init__
+
+    def spy(self, thetas, omegas, seeds, *args, **kwargs):
+        starts.append((np.array(thetas), np.array(omegas), list(seeds)))
+        real(self, thetas, omegas, seeds, *args, **kwargs)
+
+    monkeypatch.setattr(SlotTrainer, "__init__", spy)
+    run_calibration(config, tmp_path, progress=False)
+    with np.load(tmp_path / "cells" / f"{BASE.name}.npz") as source:
+        np.testing.assert_array_equal(starts[1][0], source["theta"])
+        np.testing.assert_array_equal(starts[1][1], source["omega"])
+    assert not np.array_equal(starts[0][0], starts[1][0])
+    assert starts[1][2] != starts[0][2]  # fresh random streams
+    record = json.loads((tmp_path / "cells" / f"{config.cells[1].name}.json").read_text())
+    source_record = json.loads((tmp_path / "cells" / f"{BASE.name}.json").read_text())
+    assert [s["start_fitness"] for s in record["searches"]] == [
+        s["returned_fitness"] for s in source_record["searches"]
+    ]
+
+
+def test_a_continue_cell_whose_source_holds_no_critics_is_refused_before_compute(
+    tmp_path, monkeypatch
+):
+    config = tiny_study(BASE, dataclasses.replace(BASE, continue_from=BASE.name))
+    run_calibration(dataclasses.replace(config, cells=(BASE,)), tmp_path, progress=False)
+    npz = tmp_path / "cells" / f"{BASE.name}.npz"
+    with np.load(npz) as data:
+        theta = data["theta"]
+    np.savez_compressed(npz, theta=theta)  # as stored before the study kept Critics
+    monkeypatch.setattr(study, "run_cell", lambda *a, **k: pytest.fail("computed"))
+    with pytest.raises(ValueError, match="continue_from.*no Critics"):
+        run_calibration(config, tmp_path, progress=False)
+
+
+# ------------------------------------------------------------------ judged summary
+def test_judged_summary_finds_the_first_optima_under_both_aggregations():
+    steps = [100, 200, 300, 400, 500, 600]
+    fitness_all = [0.0, 0.3, 0.2, 0.35, 0.95, 0.5]
+    fitness_mean = [0.2, 0.6, 0.7, 0.65, 0.96, 0.5]
+    labels = [
+        "swinging low",
+        "spinning",
+        "one rod up",  # not an optimum under all (0.2 < 0.3), one under mean (0.7 > 0.6)
+        "one rod up",  # an optimum under all only
+        "balancing",
+        "balancing",  # never an optimum
+    ]
+    out = judged_summary(steps, fitness_all, fitness_mean, labels)
+    assert out == {
+        "best_all": 0.95,
+        "first_090_all_steps": 500,
+        "first_balancing_all_steps": 500,
+        "first_rod_up_all_steps": 400,
+        "best_mean": 0.96,
+        "first_090_mean_steps": 500,
+        "first_balancing_mean_steps": 500,
+        "first_rod_up_mean_steps": 300,
+    }
+    never = judged_summary(steps[:2], fitness_all[:2], fitness_mean[:2], labels[:2])
+    assert never["first_090_all_steps"] is None and never["first_rod_up_mean_steps"] is None
+    assert judged_summary([], [], [], [])["best_all"] == 0.0
+
+
+def test_judged_labels_are_the_behaviour_labels_of_the_judged_policies():
+    config = tiny_study(BASE)
+    record, _ = study.run_cell(BASE, config)
+    for search in record["searches"]:
+        assert record["labels"][search["history_label"][-1]] in record["labels"]
+        assert search["best_all"] == max(search["history_fitness_all"])
+        # the returned Actor is one of the judged policies: its label is among theirs
+        assert search["behaviour"] in [record["labels"][i] for i in search["history_label"]]
+        assert search["returned_fitness"] == search["best_all"]
+
+
+# ------------------------------------------------------------------ kill and resume
+def test_a_study_killed_mid_cell_resumes_to_the_same_cells(tmp_path, monkeypatch):
+    config = tiny_study(
+        BASE,
+        dataclasses.replace(BASE, exploring_starts=True),
+        dataclasses.replace(BASE, continue_from=BASE.name),
+    )
+    options = {"progress": False, "checkpoint_seconds": 0, "check_steps": 50}
+    whole = run_calibration(config, tmp_path / "whole", **options)
+
+    writes = []
+    write = inflight.atomic_write
+
+    def die_committing_the_9th(path, data):  # the second cell: 7 checkpoints per cell
+        writes.append(path)
+        if len(writes) == 2 * 9:  # its data file is written, its metadata is not
+            raise KeyboardInterrupt
+        write(path, data)
+
+    killed = tmp_path / "killed"
+    monkeypatch.setattr(inflight, "atomic_write", die_committing_the_9th)
+    with pytest.raises(KeyboardInterrupt):
+        run_calibration(config, killed, **options)
+    monkeypatch.undo()
+    (meta,) = (killed / "inflight").glob("*.json")
+    assert meta.stem == config.cells[1].name
+    assert json.loads(meta.read_text())["trainer"]["searches"]  # searches in flight
+    loaded = []
+    real = inflight.CellCheckpoint.load
+    monkeypatch.setattr(
+        inflight.CellCheckpoint, "load", lambda *a: loaded.append(r := real(*a)) or r
+    )
+    resumed = run_calibration(config, killed, **options)
+    assert loaded[0] is not None  # the second cell continued from its checkpoint
+    assert not list((killed / "inflight").iterdir())
+    pd.testing.assert_frame_equal(resumed.searches, whole.searches)
+    for cell in config.cells:
+        ours, theirs = (
+            json.loads((folder / "cells" / f"{cell.name}.json").read_text())
+            for folder in (killed, tmp_path / "whole")
+        )
+        ours.pop("seconds"), theirs.pop("seconds")
+        assert ours == theirs
+        with (
+            np.load(killed / "cells" / f"{cell.name}.npz") as a,
+            np.load(tmp_path / "whole" / "cells" / f"{cell.name}.npz") as b,
+        ):
+            for key in ("theta", "omega"):
+                np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_a_checkpoint_of_other_settings_is_refused_by_name(tmp_path, monkeypatch):
+    config = tiny_study(BASE)
+    options = {"progress": False, "checkpoint_seconds": 0, "check_steps": 50}
+    monkeypatch.setattr(
+        study, "judged_summary", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt())
+    )
+    with pytest.raises(KeyboardInterrupt):  # killed after its last checkpoint
+        run_calibration(config, tmp_path, **options)
+    monkeypatch.undo()
+    with pytest.raises(ValueError, match="inflight.*other settings"):
+        run_calibration(dataclasses.replace(config, seed=5), tmp_path, **options)
+
+
+# ------------------------------------------------------------------ the grid
+def test_the_two_cart_study_grid_reads_and_its_report_writes(tmp_path):
+    config = load_calibration("configs/study-two-cart.yaml")
+    assert (config.seeds, config.max_steps, config.batch_size) == (4, 1_000_000, 256)
+    assert config.env.n_carts == 2 and config.env == CalibrationConfig().env
+    default = config.cells[0]
+    assert default == Cell()  # the default cell: what the others are compared against
+    kinds = {(c.reward, c.exploring_starts, c.continue_from) for c in config.cells[1:]}
+    assert kinds == {
+        ("height", True, ""),
+        ("height-product", False, ""),
+        ("height", False, default.name),
+    }
+    assert config.starts == StartSpread()  # the documented default distribution
+    # a tiny version of it runs end to end and writes the study's table and curves
+    small = dataclasses.replace(
+        config,
+        seeds=2,
+        max_steps=300,
+        batch_size=32,
+        env=dataclasses.replace(config.env, steps=60),
+        ddpg=dataclasses.replace(config.ddpg, buffer_size=500, warmup_steps=100),
+    )
+    result = run_calibration(small, tmp_path, progress=False)
+    table = pd.read_csv(tmp_path / "study.csv")
+    assert list(table["cell"]) == [c.name for c in config.cells]
+    assert (tmp_path / "study.png").stat().st_size > 10_000
+    best = pd.read_csv(tmp_path / "best_so_far.csv")
+    assert set(best["aggregation"]) == {"all", "mean"}
+    assert "a rod up (mean)" in (tmp_path / "calibration.md").read_text()
+    assert (tmp_path / ".gitignore").read_text().split() == ["*.npz", "inflight/", ".*.tmp"]
+    assert len(result.searches) == 2 * len(config.cells)
