@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.experiment.executors import EXECUTORS
-from lonlib.storage.store import CorruptDataError, DataWriteError, MissingExperimentError, p_label
+from lonlib.storage.store import CorruptDataError, DataWriteError, p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
 
@@ -158,7 +158,7 @@ def _dry_run_reader(verb: str, root: Path) -> None:
     """``--dry-run`` of a verb that reads an experiment: the folder holds one."""
     from lonlib.storage.store import read_manifest
 
-    name = read_manifest(root).get("config", {}).get("name", "?")
+    name = read_manifest(root)["config"].get("name", "?")
     print(f"dry run: lonlib {verb} would read the experiment {name!r} in {root}. Nothing done.")
 
 
@@ -446,9 +446,19 @@ def main(argv: list[str] | None = None) -> None:
     show_lonlib_messages()
     try:
         args.func(args)
-    except (ValueError, CorruptDataError, DataWriteError, MissingExperimentError) as error:
-        print(f"lonlib: error: {error}", file=sys.stderr)
+    except (ValueError, CorruptDataError, OSError) as error:
+        print(f"lonlib: error: {_error_message(error)}", file=sys.stderr)
         raise SystemExit(2) from None
+
+
+def _error_message(error: Exception) -> str:
+    """What ``lonlib: error:`` says of ``error``: an OSError without its "[Errno N]" prefix,
+    naming its file when it has one."""
+    if not isinstance(error, OSError) or error.strerror is None:
+        return str(error)
+    if error.filename is not None:
+        return f"{error.filename}: {error.strerror}"
+    return error.strerror
 
 
 if __name__ == "__main__":

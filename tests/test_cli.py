@@ -131,3 +131,68 @@ def test_a_dry_run_checks_everything_and_writes_nothing(tmp_path, capsys):
     assert "different configuration" in _fails(
         ["run", "quick", "--out", str(reference), "--dry-run"], capsys
     )
+
+
+def _clean(error: str) -> str:
+    """``error`` is one line in the one style, with no traceback nor "[Errno N]"."""
+    assert error.startswith("lonlib: error: "), error
+    assert "Traceback" not in error and "[Errno" not in error, error
+    return error
+
+
+def _copy(tiny_experiment, tmp_path: Path) -> Path:
+    """A copy of the tiny experiment's folder, to damage."""
+    import shutil
+
+    return Path(shutil.copytree(tiny_experiment[1], tmp_path / "exp"))
+
+
+def test_file_system_errors_are_said_in_the_one_style(tiny_experiment, tmp_path, capsys):
+    experiment = tiny_experiment[1]
+    a_file = tmp_path / "afile"
+    a_file.write_text("")
+    # lon --out a file: the export folder cannot be created
+    error = _clean(_fails(["lon", str(experiment), "--out", str(a_file)], capsys))
+    assert str(a_file) in error
+    # run with a folder as its configuration
+    error = _clean(_fails(["run", str(tmp_path), "--dry-run"], capsys))
+    assert "is a folder, not a configuration file" in error
+
+
+@pytest.mark.parametrize("verb", ["analyse", "record"])
+def test_an_output_folder_that_is_a_file_is_said_in_the_one_style(
+    verb, tiny_experiment, tmp_path, capsys
+):
+    folder = _copy(tiny_experiment, tmp_path)
+    (folder / {"analyse": "figures", "record": "recordings"}[verb]).write_text("")
+    error = _clean(_fails([verb, str(folder)], capsys))
+    assert str(folder) in error
+
+
+@pytest.mark.parametrize("text", ["[1, 2]", '{"config": 5}', '"manifest"'])
+@pytest.mark.parametrize("verb", READERS)
+def test_a_manifest_of_another_shape_is_refused_as_corrupt(verb, text, tmp_path, capsys):
+    (tmp_path / "manifest.json").write_text(text)
+    for argv in ([verb, str(tmp_path)], [verb, str(tmp_path), "--dry-run"]):
+        error = _clean(_fails(argv, capsys))
+        assert "manifest.json: not a manifest" in error
+
+
+def test_a_manifest_of_another_shape_is_refused_by_the_store(tmp_path):
+    from lonlib.storage.manifest import sessions_with_other_result_path, updated_manifest
+    from lonlib.storage.store import CorruptDataError, read_manifest
+
+    (tmp_path / "manifest.json").write_text("[1, 2]")
+    for read in (read_manifest, sessions_with_other_result_path):
+        with pytest.raises(CorruptDataError, match="not a manifest"):
+            read(tmp_path)
+    (tmp_path / "manifest.json").write_text('{"config": 5}')
+    with pytest.raises(CorruptDataError, match="not a manifest"):
+        updated_manifest(load_config("quick"), tmp_path)
+
+
+def test_a_calibration_grid_whose_cells_are_not_a_list_is_refused_by_name(tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("cells: 5\n")
+    error = _clean(_fails(["calibrate", str(tmp_path / "out"), "--grid", str(grid)], capsys))
+    assert "cells must be a list" in error

@@ -355,7 +355,10 @@ class CalibrationConfig:
         merged = {**base, **values}
         cell_fields = {f.name for f in dataclasses.fields(Cell)}
         cells = []
-        for cell in merged.pop("cells"):
+        listed = merged.pop("cells")
+        if not isinstance(listed, (list, tuple)):
+            raise ValueError(f"cells must be a list of mappings (one per cell), got {listed!r}")
+        for cell in listed:
             if not isinstance(cell, dict) or set(cell) - cell_fields:
                 raise ValueError(f"a cell must be a mapping of {sorted(cell_fields)}, got {cell!r}")
             cells.append(Cell(**cell))

@@ -402,6 +402,8 @@ def load_config(spec: str | Path) -> ExperimentConfig:
         return named_config(str(spec))
     if not path.exists():
         raise ValueError(f"configuration {spec!r} is neither one of {NAMED_CONFIGS} nor a file")
+    if not path.is_file():
+        raise ValueError(f"{path}: is a folder, not a configuration file")
     try:
         values = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as error:

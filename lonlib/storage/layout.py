@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lonlib.storage.atomic import MissingExperimentError, read_json
+from lonlib.storage.atomic import CorruptDataError, MissingExperimentError, read_json
 
 INFLIGHT_FOLDER = ".inflight"  # in the experiment folder: in-flight checkpoints
 RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
@@ -38,7 +38,19 @@ def read_manifest(root: Path) -> dict:
             "(CONFIG=quick writes data/quick, CONFIG=paper data/paper), the sample_lon notebook, "
             f"or `lonlib run quick --out {root}`"
         )
-    return read_json(path)
+    return checked_manifest(read_json(path), path)
+
+
+def checked_manifest(manifest: object, path: Path) -> dict:
+    """``manifest`` as read from ``path``, if it is a mapping whose ``config`` is a mapping:
+    CorruptDataError naming the file otherwise (valid JSON of another shape)."""
+    if not isinstance(manifest, dict):
+        raise CorruptDataError(
+            f"{path}: not a manifest (expected a JSON object, got {type(manifest).__name__})"
+        )
+    if not isinstance(manifest.get("config"), dict):
+        raise CorruptDataError(f"{path}: not a manifest (its 'config' is not a JSON object)")
+    return manifest
 
 
 def p_label(p: float) -> str:

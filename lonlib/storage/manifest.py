@@ -23,6 +23,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from lonlib.storage.layout import checked_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.store import read_json
 
@@ -70,7 +71,7 @@ def updated_manifest(
     path = manifest_path(out)
     now = datetime.now(UTC).isoformat(timespec="seconds")
     if path.exists():
-        manifest = read_json(path)
+        manifest = checked_manifest(read_json(path), path)
         stored = type(config).from_mapping(manifest["config"])
         if stored.comparable() != config.comparable():
             changed = sorted(
@@ -117,7 +118,8 @@ def _manifest(experiment: str | Path | Mapping[str, Any]) -> Mapping[str, Any]:
     """A manifest given as itself or by its experiment folder."""
     if isinstance(experiment, Mapping):
         return experiment
-    return read_json(manifest_path(Path(experiment)))
+    path = manifest_path(Path(experiment))
+    return checked_manifest(read_json(path), path)
 
 
 def sessions_with_other_result_path(
