@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.experiment.executors import EXECUTORS
+from lonlib.storage.atomic import check_output_place
 from lonlib.storage.store import CorruptDataError, DataWriteError, p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
@@ -60,6 +61,8 @@ def _markdown_page(text: str | None) -> Path | None:
     if text is None:
         return None
     page = Path(text)
+    if page.is_dir():
+        raise ValueError(f"--docs {page}: is a folder, not a file")
     if not page.is_file():
         raise ValueError(f"--docs {page}: no such file")
     return page
@@ -69,14 +72,7 @@ def _check_output_folder(out: Path) -> str:
     """What ``lonlib run`` checks of its output folder before computing, without creating or
     writing anything: the parent exists, ``out`` is not a file and, if it exists, is
     writable. Returns "new" or "exists"."""
-    if not out.parent.is_dir():
-        raise DataWriteError(
-            2,
-            f"cannot write {out}: its parent folder {out.parent} does not exist "
-            "(a typo, or a file system that is not mounted?); create it first",
-        )
-    if out.exists() and not out.is_dir():
-        raise DataWriteError(20, f"cannot write {out}: it is a file, not a folder")
+    check_output_place(out)
     if out.exists() and not os.access(out, os.W_OK | os.X_OK):
         raise DataWriteError(13, f"cannot write {out}: permission denied")
     return "exists" if out.exists() else "new"

@@ -196,3 +196,20 @@ def test_a_calibration_grid_whose_cells_are_not_a_list_is_refused_by_name(tmp_pa
     grid.write_text("cells: 5\n")
     error = _clean(_fails(["calibrate", str(tmp_path / "out"), "--grid", str(grid)], capsys))
     assert "cells must be a list" in error
+
+
+def test_an_output_under_a_file_or_a_folder_as_page_is_said_to_be_one(tmp_path, capsys):
+    from lonlib.storage.atomic import check_output_folder
+
+    a_file = tmp_path / "afile"
+    a_file.write_text("")
+    for out in (a_file / "x", a_file / "x" / "y"):
+        error = _clean(_fails(["run", "quick", "--out", str(out), "--dry-run"], capsys))
+        assert f"{a_file} is a file, not a folder" in error and "does not exist" not in error
+        with pytest.raises(DataWriteError, match="is a file, not a folder"):
+            check_output_folder(out)
+    error = _clean(_fails(["calibrate", str(a_file / "x"), "--dry-run"], capsys))
+    assert "is a file, not a folder" in error
+    for argv in (["analyse", "data/reference"], ["calibrate", str(tmp_path / "out")]):
+        error = _clean(_fails([*argv, "--docs", str(tmp_path), "--dry-run"], capsys))
+        assert f"--docs {tmp_path}: is a folder, not a file" in error

@@ -128,6 +128,31 @@ def read_json(path: Path) -> dict:
         raise CorruptDataError(f"{path}: cannot read JSON ({error})") from error
 
 
+def check_output_place(out: Path) -> None:
+    """What :func:`check_output_folder` checks without creating or writing anything: the
+    parent of ``out`` is an existing folder and ``out`` is not a file (DataWriteError
+    naming the cause otherwise)."""
+    out = Path(out)
+    parent = out.parent
+    if parent.exists() and not parent.is_dir():
+        raise DataWriteError(
+            errno.ENOTDIR, f"cannot write {out}: its parent {parent} is a file, not a folder"
+        )
+    if not parent.is_dir():
+        missing = next(p for p in [parent, *parent.parents] if p.parent.is_dir() or p == p.parent)
+        if missing.exists() and not missing.is_dir():  # a file further up
+            raise DataWriteError(
+                errno.ENOTDIR, f"cannot write {out}: {missing} is a file, not a folder"
+            )
+        raise DataWriteError(
+            errno.ENOENT,
+            f"cannot write {out}: its parent folder {parent} does not exist "
+            "(a typo, or a file system that is not mounted?); create it first",
+        )
+    if out.exists() and not out.is_dir():
+        raise DataWriteError(errno.ENOTDIR, f"cannot write {out}: it is a file, not a folder")
+
+
 def check_output_folder(out: Path) -> None:
     """Before any compute: ``out`` exists or can be created inside an existing folder, and
     accepts a new file. A missing parent is refused rather than created (a typo, or a shared
@@ -136,14 +161,7 @@ def check_output_folder(out: Path) -> None:
     Raises :class:`DataWriteError` naming the folder and the cause.
     """
     out = Path(out)
-    if not out.parent.is_dir():
-        raise DataWriteError(
-            errno.ENOENT,
-            f"cannot write {out}: its parent folder {out.parent} does not exist "
-            "(a typo, or a file system that is not mounted?); create it first",
-        )
-    if out.exists() and not out.is_dir():
-        raise DataWriteError(errno.ENOTDIR, f"cannot write {out}: it is a file, not a folder")
+    check_output_place(out)
     try:
         out.mkdir(exist_ok=True)
         handle, name = tempfile.mkstemp(prefix=".write-check.", suffix=TEMPORARY_SUFFIX, dir=out)
