@@ -119,7 +119,6 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     from lonlib.experiment.lockstep import check_lockstep
     from lonlib.storage.manifest import manifest_path, updated_manifest
 
-    check_range("workers", args.workers, 1, 4096)
     kind = resolve_executor(
         session_executor(args.executor, config.executor, args.scheduler),
         args.workers,
@@ -393,7 +392,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     record.add_argument("dir", help="experiment folder, e.g. data/reference")
     record.add_argument("--bins", type=int, default=50, help="histogram bins of the peaks")
-    record.add_argument("--limit", type=int, default=24, help="at most this many recordings")
+    record.add_argument(
+        "--limit", type=int, default=24, help="at most this many recordings (0: all; default 24)"
+    )
     record.set_defaults(func=_record)
 
     verify = sub.add_parser(
@@ -402,7 +403,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     verify.add_argument("dir", help="experiment folder, e.g. data/reference")
     verify.add_argument("--no-recordings", action="store_true", help="skip the recordings")
-    verify.add_argument("--limit", type=int, default=20, help="findings printed (default 20)")
+    verify.add_argument(
+        "--limit", type=int, default=20, help="findings printed (0: none; default 20)"
+    )
     verify.add_argument("--all", action="store_true", help="print every finding")
     verify.set_defaults(func=_verify)
 
@@ -436,11 +439,31 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# The ranges of the verbs' numeric options, checked once before any verb runs, so that
+# --dry-run refuses what the real run refuses: (option, low, high) with None for no bound.
+ARGUMENT_RANGES = (
+    ("fitness_tolerance", 0.0, None),
+    ("bins", 1, None),
+    ("workers", 1, 4096),
+    ("limit", 0, None),
+)
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """The numeric options a verb has (:data:`ARGUMENT_RANGES`) are in range: ValueError
+    naming the option otherwise."""
+    for name, low, high in ARGUMENT_RANGES:
+        value = getattr(args, name, None)
+        if value is not None:
+            check_range(f"--{name.replace('_', '-')}", value, low, high)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``lonlib`` command."""
     args = build_parser().parse_args(argv)
     show_lonlib_messages()
     try:
+        check_arguments(args)
         args.func(args)
     except (ValueError, CorruptDataError, OSError) as error:
         print(f"lonlib: error: {_error_message(error)}", file=sys.stderr)

@@ -16,6 +16,7 @@ from lonlib.storage.store import DataWriteError
 
 READERS = ["status", "lon", "analyse", "record", "verify"]
 # What reStructuredText or Sphinx markup looks like in a help text.
+DEPRECATED = "lonlib: --tolerance is deprecated, use --fitness-tolerance"
 MARKUP = re.compile(r"``|:(func|class|mod|data|meth):`")
 
 
@@ -213,3 +214,35 @@ def test_an_output_under_a_file_or_a_folder_as_page_is_said_to_be_one(tmp_path, 
     for argv in (["analyse", "data/reference"], ["calibrate", str(tmp_path / "out")]):
         error = _clean(_fails([*argv, "--docs", str(tmp_path), "--dry-run"], capsys))
         assert f"--docs {tmp_path}: is a folder, not a file" in error
+
+
+@pytest.mark.parametrize(
+    ("argv", "option"),
+    [
+        (["lon", "DIR", "--fitness-tolerance", "-1"], "--fitness-tolerance"),
+        (["lon", "DIR", "--tolerance", "-1"], "--fitness-tolerance"),
+        (["analyse", "DIR", "--fitness-tolerance", "-1"], "--fitness-tolerance"),
+        (["analyse", "DIR", "--bins", "0"], "--bins"),
+        (["record", "DIR", "--bins", "0"], "--bins"),
+        (["record", "DIR", "--limit", "-1"], "--limit"),
+        (["verify", "DIR", "--limit", "-1"], "--limit"),
+        (["calibrate", "OUT", "--workers", "0"], "--workers"),
+        (["run", "quick", "--out", "OUT", "--workers", "0"], "--workers"),
+    ],
+)
+@pytest.mark.parametrize("dry_run", [True, False])
+def test_an_option_out_of_range_is_refused_with_or_without_dry_run(
+    argv, option, dry_run, tiny_experiment, tmp_path, capsys
+):
+    argv = [{"DIR": str(tiny_experiment[1]), "OUT": str(tmp_path / "out")}.get(a, a) for a in argv]
+    error = _fails([*argv, *["--dry-run"] * dry_run], capsys)
+    error = _clean(error.removeprefix(DEPRECATED + "\n"))
+    assert error.startswith(f"lonlib: error: {option} must be in"), error
+    assert list(tmp_path.iterdir()) == []  # nothing written
+
+
+def test_record_optima_refuses_a_negative_limit(tiny_experiment, tmp_path):
+    from lonlib.analysis.pipeline import record_optima
+
+    with pytest.raises(ValueError, match="limit must be in"):
+        record_optima(tiny_experiment[1], limit=-1)

@@ -61,6 +61,7 @@ from lonlib.storage.store import (
 )
 from lonlib.task.behaviour import descriptors_of
 from lonlib.util.deprecation import renamed_keyword
+from lonlib.util.validation import check_range
 
 
 def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
@@ -314,10 +315,15 @@ def optima_to_record(
 
 
 def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[Path]:
-    """Rerun recordings of the selected optima under ``<experiment>/recordings/``."""
+    """Rerun recordings of the selected optima under ``<experiment>/recordings/``: the
+    first ``limit`` of them, every one when ``limit`` is 0."""
+    check_range("limit", limit, 0)
+    check_range("bins", bins, 1)
     folder = Path(folder)
     config, trials = load_experiment(folder)
-    selection = optima_to_record(trials, bins).head(limit)
+    selection = optima_to_record(trials, bins)
+    if limit:
+        selection = selection.head(limit)
     paths = []
     for row in selection.itertuples():
         optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
