@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.experiment.executors import EXECUTORS
 from lonlib.storage.atomic import check_output_place
+from lonlib.storage.configs import EXECUTORS
 from lonlib.storage.store import CorruptDataError, DataWriteError, p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range

@@ -246,3 +246,24 @@ def test_record_optima_refuses_a_negative_limit(tiny_experiment, tmp_path):
 
     with pytest.raises(ValueError, match="limit must be in"):
         record_optima(tiny_experiment[1], limit=-1)
+
+
+def test_importing_the_command_leaves_torch_unloaded():
+    """``lonlib --help`` and ``lonlib status`` start without loading torch."""
+    import subprocess
+    import sys
+
+    code = "import sys, lonlib.cli; print('torch' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("verb", ["lon", "analyse"])
+def test_the_old_tolerance_flag_sets_the_fitness_tolerance_and_says_so(verb, capsys):
+    args = build_parser().parse_args([verb, "DIR", "--tolerance", "0.5"])
+    assert args.fitness_tolerance == 0.5
+    assert capsys.readouterr().err == DEPRECATED + "\n"
+    args = build_parser().parse_args([verb, "DIR"])
+    assert args.fitness_tolerance == 1e-9
+    assert capsys.readouterr().err == ""
