@@ -181,3 +181,15 @@ def test_the_step_and_the_acceptance_are_pluggable_like_scipys_basinhopping():
     # no noise: each start is exactly the incumbent's parameters (trial i returns input + i+1)
     np.testing.assert_array_equal(calls[1][0], START[0] + 1)
     np.testing.assert_array_equal(calls[3][0], START[0] + 3)
+
+
+def test_each_trial_records_the_seconds_of_its_local_search(monkeypatch):
+    import types
+
+    import lonlib.search.algorithm as algorithm
+
+    ticks = iter(np.arange(100) * 1.5)
+    monkeypatch.setattr(algorithm, "time", types.SimpleNamespace(perf_counter=lambda: next(ticks)))
+    search, _ = scripted([0.3, 0.2, 0.1])
+    state = basin_hopping(search, START, BasinHoppingConfig(tolerance=2), run_seed=0)
+    assert [t.seconds for t in state.trials] == [1.5, 1.5, 1.5]

@@ -48,5 +48,5 @@ def png_bytes(fig: plt.Figure) -> bytes:
 def save_png(fig: plt.Figure, path: str | Path) -> Path:
     """Write the figure as a byte-stable PNG (:func:`png_bytes`)."""
     path = Path(path)
-    fig.savefig(path, dpi=DPI, format="png", metadata=PNG_METADATA)
+    path.write_bytes(png_bytes(fig))
     return path
