@@ -167,3 +167,12 @@ def test_figures_colour_and_stack_by_behaviour_label():
     # one scheme: <role>_<behaviour>_optimum_..., file-name safe (no parentheses)
     assert any(n.startswith("label-best_spinning-in-phase_optimum_p=") for n in names)
     assert any(n.startswith("label-best_swinging-high_optimum_p=") for n in names)
+
+
+def test_boxplot_marks_each_runs_best_once_whatever_the_tables_index():
+    table = __import__("pandas").concat([HAND, HAND.assign(run=HAND["run"] + 10)])
+    table.index = [0] * len(table)  # e.g. tables concatenated without ignore_index
+    accepted = table[table["accepted"]]
+    fig = optima_boxplot(table)
+    points = sum(len(c.get_offsets()) for c in fig.axes[0].collections)
+    assert points == len(accepted) + accepted.groupby(["p", "run"]).ngroups

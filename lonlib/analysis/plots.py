@@ -95,7 +95,7 @@ def _count(optima: int, runs: int) -> str:
 def optima_boxplot(trials: pd.DataFrame) -> plt.Figure:
     """Fig. 2: fitness of the accepted local optima, one box per perturbation strength, every
     optimum a point, each run's best marked (claim c compares them), n under each box."""
-    accepted = trials[trials["accepted"]].copy()
+    accepted = trials[trials["accepted"]].reset_index(drop=True)  # idxmax needs unique labels
     ps = sorted(accepted["p"].unique(), reverse=True)
     order = [p_label(p) for p in ps]
     accepted["p_label"] = [p_label(p) for p in accepted["p"]]
