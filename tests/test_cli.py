@@ -267,3 +267,11 @@ def test_the_old_tolerance_flag_sets_the_fitness_tolerance_and_says_so(verb, cap
     args = build_parser().parse_args([verb, "DIR"])
     assert args.fitness_tolerance == 1e-9
     assert capsys.readouterr().err == ""
+
+
+def test_the_session_executor_is_part_of_the_experiment_api():
+    import lonlib.experiment as experiment
+
+    assert "session_executor" in experiment.__all__
+    assert experiment.__all__ == sorted(experiment.__all__, key=lambda n: (n.islower(), n))
+    assert experiment.session_executor(None, "serial", None) == "serial"

@@ -19,6 +19,7 @@ from lonlib.experiment.executors import (
     run_dask,
     run_pool,
     run_serial,
+    session_executor,
 )
 from lonlib.experiment.lockstep import (
     CHECKPOINT_SECONDS,
@@ -82,6 +83,7 @@ __all__ = [
     "run_serial",
     "run_summary",
     "save_inflight",
+    "session_executor",
     "split_inflight",
     "split_jobs",
     "spread_checkpoints",
