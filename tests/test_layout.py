@@ -90,7 +90,12 @@ CONFIGURATIONS = {
 
 
 @pytest.mark.parametrize(
-    "path, name", [*CONFIGURATIONS.items(), ("lonlib/storage/configs.py", "DDPGConfig")]
+    "path, name",
+    [
+        *CONFIGURATIONS.items(),
+        ("lonlib/storage/configs.py", "DDPGConfig"),
+        ("lonlib/calibration/study.py", "Cell"),
+    ],
 )
 def test_every_field_of_a_public_configuration_has_a_docstring(path, name):
     """CleanRL's ``Args`` habit: a string literal right under every field says what it is."""

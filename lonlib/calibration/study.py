@@ -157,10 +157,16 @@ class Cell:
     motor (its gain stays 1: the command range is the +-2 m/s of the velocity sensors)."""
 
     motor: str = "velocity"
+    """Motor model of the carts: ``force``, ``acceleration`` or ``velocity``."""
     integrator: str = "semi-implicit"
+    """Integrator of the physics: ``euler`` or ``semi-implicit``."""
     motor_gain: float = 1.0
+    """Force [N] or acceleration [m/s^2] per unit of command; unused (1) by the velocity
+    motor."""
     motor_tau: float = 0.02
+    """Time constant [s] of the velocity motor's response to its command."""
     reward: str = "height"
+    """Reward of the training episodes (:data:`REWARDS`, e.g. ``height``, ``slow-height``)."""
     exploring_starts: bool = False
     """Training episodes start from the study's :class:`StartSpread` (name suffix
     ``_explore``)."""
