@@ -42,18 +42,35 @@ def test_the_readme_fits_a_screen_and_its_first_screen_holds_the_essentials():
     assert len(lines) <= 250
     first = "\n".join(lines[:150])
     for needed in [
+        "Local Optima Networks for Reinforcement Learning",  # the purpose: the paper
         "![3-D LON of the reference experiment",  # the reference LON figure
-        "make reproduce",
-        "make test",
-        "```python",
+        "make reproduce   #",  # the two commands ...
+        "make test        #",
+        "```python",  # the Python example
         "## The result",
         "## Concepts and code",
         "lonlib.task",
-        "@inproceedings{zhou2024lonrl",
+        "@inproceedings{zhou2024lonrl",  # BibTeX
+        "## Licence",
         "LICENSE",
         "data/reference-v2/",
     ]:
         assert needed in first, needed
+    # ... with their measured times
+    assert re.search(r"`make setup` \d+ s,\s+`make test` \d+ s, `make reproduce` \d+ s", first)
+    assert re.search(r"## Concepts and code\n(?:.*\n)*?\|---", first)  # a table
+
+
+def sentences(text: str) -> int:
+    """A simple sentence count: pieces ending in ``.``, ``!``, ``?``, ``:`` or ``;`` before
+    a space or the end (a colon or semicolon starts a new sentence, for brevity's sake)."""
+    return len([piece for piece in re.split(r"(?<=[.!?:;])\s+", text.strip()) if piece])
+
+
+def test_the_readme_result_is_three_sentences_at_most():
+    result = README.read_text().split("## The result\n")[1].split("\n## ")[0]
+    assert sentences(result) <= 3, result
+    assert sentences("A b: c. D e; f. G h 0.45, i. J") == 6
     assert (ROOT / "LICENSE").read_text().startswith("MIT License")
     assert "<!--" not in README.read_text()  # generated tables live in docs/, not here
 
