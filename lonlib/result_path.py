@@ -1,6 +1,5 @@
 """Moved to :mod:`lonlib.storage.result_path`; this name stays importable for code written before
-the
-subpackages (the golden test among it): it is that module, not a copy."""
+the subpackages (the golden test among it): it is that module, not a copy."""
 
 import sys
 

@@ -5,6 +5,7 @@ show is checked (a dry run, or for real where it is cheap and reads only)."""
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import shlex
@@ -41,18 +42,35 @@ def test_the_readme_fits_a_screen_and_its_first_screen_holds_the_essentials():
     assert len(lines) <= 250
     first = "\n".join(lines[:150])
     for needed in [
+        "Local Optima Networks for Reinforcement Learning",  # the purpose: the paper
         "![3-D LON of the reference experiment",  # the reference LON figure
-        "make reproduce",
-        "make test",
-        "```python",
+        "make reproduce   #",  # the two commands ...
+        "make test        #",
+        "```python",  # the Python example
         "## The result",
         "## Concepts and code",
         "lonlib.task",
-        "@inproceedings{zhou2024lonrl",
+        "@inproceedings{zhou2024lonrl",  # BibTeX
+        "## Licence",
         "LICENSE",
         "data/reference-v2/",
     ]:
         assert needed in first, needed
+    # ... with their measured times
+    assert re.search(r"`make setup` \d+ s,\s+`make test` \d+ s, `make reproduce` \d+ s", first)
+    assert re.search(r"## Concepts and code\n(?:.*\n)*?\|---", first)  # a table
+
+
+def sentences(text: str) -> int:
+    """A simple sentence count: pieces ending in ``.``, ``!``, ``?``, ``:`` or ``;`` before
+    a space or the end (a colon or semicolon starts a new sentence, for brevity's sake)."""
+    return len([piece for piece in re.split(r"(?<=[.!?:;])\s+", text.strip()) if piece])
+
+
+def test_the_readme_result_is_three_sentences_at_most():
+    result = README.read_text().split("## The result\n")[1].split("\n## ")[0]
+    assert sentences(result) <= 3, result
+    assert sentences("A b: c. D e; f. G h 0.45, i. J") == 6
     assert (ROOT / "LICENSE").read_text().startswith("MIT License")
     assert "<!--" not in README.read_text()  # generated tables live in docs/, not here
 
@@ -254,3 +272,119 @@ def test_a_documented_command_works(source, command, project, capsys):
         assert "would read" in _lonlib(
             ["analyse", settings.get("EXPERIMENT", "data/reference")], project, capsys
         )
+
+
+# --- every dotted lonlib name and every Python example the README and the docs show ----
+
+# A ```python block whose first line is this comment is not run by the tests (it trains for
+# minutes); every other ```python block of README.md and docs/ is run.
+NOT_RUN = "# not run in tests"
+FENCE = re.compile(r"^```[^\n]*\n.*?^```", re.S | re.M)
+SPAN = re.compile(r"`([^`\n]+(?:\n[^`\n]+)?)`")  # a code span, at most one line break inside
+DOTTED = re.compile(r"\blonlib(?:\.[A-Za-z_]\w*)+")
+
+
+def _code(text: str) -> list[str]:
+    """The code blocks and code spans of a Markdown text (a span broken across a line joined)."""
+    blocks = FENCE.findall(text)
+    spans = [re.sub(r"\s*\n\s*", "", span) for span in SPAN.findall(FENCE.sub("", text))]
+    return blocks + spans
+
+
+def documented_names() -> list[tuple[str, str]]:
+    found = set()
+    for path in [README, *PAGES]:
+        for code in _code(path.read_text()):
+            for name in DOTTED.findall(code):
+                found.add((str(path.relative_to(ROOT)), name))
+    return sorted(found)
+
+
+# The names of before the subpackages (lonlib/basin_hopping.py, ...): importable shims that
+# the docs must not name.
+MOVED = {
+    path.stem
+    for path in (ROOT / "lonlib").glob("*.py")
+    if path.read_text().lstrip('"').startswith("Moved to ")
+}
+
+
+def resolves(name: str) -> bool:
+    """Whether ``name`` is an importable module, or an attribute chain of the longest
+    importable module prefix of it, and names no moved module."""
+    parts = name.split(".")
+    if parts[1] in MOVED:
+        return False
+    for i in range(len(parts), 0, -1):
+        try:
+            found = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for attribute in parts[i:]:
+            if not hasattr(found, attribute):
+                return False
+            found = getattr(found, attribute)
+        return True
+    return False
+
+
+# lonlib.notebook_run is papermill's "lonlib" engine (an entry point): imported before
+# papermill, papermill's import loads the entry point from the half-imported module and
+# fails. It is imported the way it runs, after papermill.
+importlib.import_module("papermill")
+NAMES = documented_names()
+
+
+def test_the_name_check_sees_the_docs_names_and_fails_on_an_old_path():
+    assert len(NAMES) > 30
+    assert ("docs/reproducing.md", "lonlib.storage.result_path.experiment_digest") in NAMES
+    assert _code("a (`lonlib.result_path.\nexperiment_digest`) b") == [
+        "lonlib.result_path.experiment_digest"
+    ]
+    assert {"basin_hopping", "store", "manifest", "result_path", "cpu_kernels"} <= MOVED
+    assert not resolves("lonlib.basin_hopping")  # importable, but the old name
+    assert not resolves("lonlib.result_path.experiment_digest")
+    assert not resolves("lonlib.storage.no_such_function")
+    assert not resolves("lonlib.calibration.study.run_calibration")
+    assert resolves("lonlib.calibration.campaign.run_calibration")
+
+
+@pytest.mark.parametrize(("source", "name"), NAMES, ids=[f"{s}:{n}" for s, n in NAMES])
+def test_a_documented_dotted_name_resolves(source, name):
+    assert resolves(name), f"{source}: {name} is an old name, or neither a module nor an attribute"
+
+
+def test_the_docs_name_the_current_environment_id():
+    for path in [README, *PAGES]:
+        assert "CoupledPendulum-v0" not in path.read_text(), path
+
+
+def python_examples() -> list[tuple[str, int, str]]:
+    found = []
+    for path in [README, *PAGES]:
+        for i, block in enumerate(re.findall(r"```python\n(.*?)```", path.read_text(), re.S)):
+            found.append((str(path.relative_to(ROOT)), i, block))
+    return found
+
+
+EXAMPLES = python_examples()
+
+
+@pytest.mark.parametrize(
+    ("source", "index", "block"), EXAMPLES, ids=[f"{s}#{i}" for s, i, _ in EXAMPLES]
+)
+def test_a_documented_python_example_runs(source, index, block, monkeypatch):
+    if block.startswith(NOT_RUN):
+        pytest.skip(f"{source}: marked {NOT_RUN!r}")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    monkeypatch.chdir(ROOT)
+    exec(compile(block, f"{source}#{index}", "exec"), {})
+
+
+def test_the_python_examples_are_found_and_only_long_ones_are_skipped():
+    sources = {source for source, _, _ in EXAMPLES}
+    assert {"README.md", "docs/rollout.md", "docs/ddpg.md"} <= sources
+    skipped = [source for source, _, block in EXAMPLES if block.startswith(NOT_RUN)]
+    assert skipped == ["docs/ddpg.md"]  # DDPG trains for minutes

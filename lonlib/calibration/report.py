@@ -1,8 +1,8 @@
 """The calibration study's report: tables, Markdown and figure from its stored cells.
 
-:func:`write_outputs` reads the cells :func:`lonlib.calibration.study.run_calibration` stored and
-writes ``calibration.csv`` (one row per cell, :func:`cell_table`), ``searches.csv`` (one row
-per search, :func:`search_table`), ``drift.csv``
+:func:`write_outputs` reads the cells :func:`lonlib.calibration.campaign.run_calibration`
+stored and writes ``calibration.csv`` (one row per cell, :func:`cell_table`),
+``searches.csv`` (one row per search, :func:`search_table`), ``drift.csv``
 (:func:`lonlib.calibration.study.integrator_drift`), ``calibration.md``
 (:func:`calibration_markdown`, the table of docs/calibration.md) and ``calibration.png``
 (:func:`calibration_figure`, drawn with seaborn under the figures' one theme).

@@ -1,13 +1,11 @@
 """Checked reading of state stored as plain data: named tensors and JSON values.
 
 An in-flight checkpoint (:mod:`lonlib.experiment.checkpoints`) stores a batch as tensors (loaded
-with
-``torch.load(..., weights_only=True)``, which builds no Python object but tensors and plain
-containers) and JSON. Neither names a Python class, so reading one runs no code of the
-file's choosing and survives moving or renaming modules. What comes back is still untrusted:
-these helpers check every value's kind, shape and dtype against what the reader expects
-before anything uses it, and raise :class:`StateLayoutError` naming the first that does not
-fit.
+with ``torch.load(..., weights_only=True)``, which builds no Python object but tensors and plain
+containers) and JSON. Neither names a Python class, so reading one runs no code of the file's
+choosing and survives moving or renaming modules. What comes back is still untrusted: these helpers
+check every value's kind, shape and dtype against what the reader expects before anything uses it,
+and raise :class:`StateLayoutError` naming the first that does not fit.
 """
 
 from __future__ import annotations

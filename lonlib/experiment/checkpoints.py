@@ -34,12 +34,11 @@ previous checkpoint whole. The batch's process removes its superseded data files
 restoring a batch removes the leftovers of a killed write (it holds the batch's run locks).
 
 Restoring is per slot (the lockstep executor, :func:`lonlib.experiment.lockstep.run_lockstep`): a
-slot
-continues only if its run still has the trials stored that it had at the write and asks for
-the start parameters the slot holds; a slot whose run went on (a search ended after the
-write) is dropped and its run continues from its stored trials. A restored search continues
-bit for bit as an uninterrupted one would (tested). These files are a cache of work in
-progress, never results: deleting ``.inflight/`` costs at most the searches in flight.
+slot continues only if its run still has the trials stored that it had at the write and asks for the
+start parameters the slot holds; a slot whose run went on (a search ended after the write) is
+dropped and its run continues from its stored trials. A restored search continues bit for bit as an
+uninterrupted one would (tested). These files are a cache of work in progress, never results:
+deleting ``.inflight/`` costs at most the searches in flight.
 """
 
 from __future__ import annotations
@@ -252,9 +251,8 @@ def check_settings(
 
 def load_inflight(checkpoint: InflightCheckpoint, device: str | None = None) -> SlotTrainer:
     """The :class:`lonlib.ddpg.trainer.SlotTrainer` stored in ``checkpoint``, on ``device``
-    (default:
-    where it was trained; the caller checks the settings, :func:`check_settings`).
-    Raises as :func:`read_inflight` and :meth:`StoredBatch.trainer`."""
+    (default: where it was trained; the caller checks the settings, :func:`check_settings`). Raises
+    as :func:`read_inflight` and :meth:`StoredBatch.trainer`."""
     return read_inflight(checkpoint).trainer(device)
 
 

@@ -14,8 +14,7 @@ sharing the batch: on the CPU they are bit for bit the serial executor's (tested
 is the other executors' (:func:`lonlib.storage.store.save_step` after every search, each run's lock
 held while it is in the batch), and every few minutes the whole batch is also written to an
 in-flight checkpoint (:mod:`lonlib.experiment.checkpoints`): a killed lockstep experiment resumes
-its
-searches in flight from there, losing at most the minutes since.
+its searches in flight from there, losing at most the minutes since.
 """
 
 from __future__ import annotations

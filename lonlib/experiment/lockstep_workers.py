@@ -58,13 +58,12 @@ def run_lockstep_processes(
     checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
 ) -> None:
     """:func:`~lonlib.experiment.lockstep.run_lockstep` in ``workers`` spawned processes, each a
-    batch
-    of up to ``slots`` searches over its share of the jobs. A process first gets the runs of
-    one in-flight checkpoint, if any, so that it resumes that batch; the other jobs are dealt
-    out in turn. With checkpoints (``checkpoint_seconds`` not None), the processes are
-    stopped and the work left dealt out again whenever a process runs out of runs while the
-    others could use its core (module docstring). ``on_done`` gets each run's summary once;
-    ``on_tick`` the number of processes busy. A run's trials are the same as in one batch."""
+    batch of up to ``slots`` searches over its share of the jobs. A process first gets the runs of
+    one in-flight checkpoint, if any, so that it resumes that batch; the other jobs are dealt out in
+    turn. With checkpoints (``checkpoint_seconds`` not None), the processes are stopped and the work
+    left dealt out again whenever a process runs out of runs while the others could use its core
+    (module docstring). ``on_done`` gets each run's summary once; ``on_tick`` the number of
+    processes busy. A run's trials are the same as in one batch."""
     check_range("workers", workers, 1, 4096)
     checkpoints = checkpoint_seconds is not None
     remaining = list(jobs)

@@ -121,11 +121,10 @@ def remove_finished_checkpoints(
     out: Path, todo: list[tuple[float, int]], config: ExperimentConfig | None = None
 ) -> None:
     """Remove the in-flight checkpoints (:mod:`lonlib.experiment.checkpoints`) all of whose runs
-    have
-    ended since (they went on without them: nothing in them can be resumed), and those
-    whose metadata is refused (truncated, planted, with ``config`` listing a run that is not
-    one of the experiment's, :func:`experiment_plan`: their runs continue from their stored
-    trials). A checkpoint whose runs another process holds is left to it."""
+    have ended since (they went on without them: nothing in them can be resumed), and those whose
+    metadata is refused (truncated, planted, with ``config`` listing a run that is not one of the
+    experiment's, :func:`experiment_plan`: their runs continue from their stored trials). A
+    checkpoint whose runs another process holds is left to it."""
     checkpoints, refused = scan_inflight(
         out, None if config is None else experiment_plan(out, config)
     )
@@ -181,11 +180,9 @@ def run_experiment(
     ``config.ddpg.device``), in this process, or with ``workers`` > 1 one batch per worker
     process, each over its share of the runs; it writes its batch to an in-flight
     checkpoint every ``checkpoint_seconds`` (``None``: never; :mod:`lonlib.experiment.checkpoints`)
-    and
-    resumes from it. ``"auto"``: Dask if a scheduler is given,
-    else a pool for ``workers`` > 1, else serial. Every executor gives a run the same
-    trials. A run whose worker dies is retried (up to ``max_attempts``) and resumes from its
-    last stored local search.
+    and resumes from it. ``"auto"``: Dask if a scheduler is given, else a pool for ``workers`` > 1,
+    else serial. Every executor gives a run the same trials. A run whose worker dies is retried (up
+    to ``max_attempts``) and resumes from its last stored local search.
 
     Before any compute: ``out`` must exist or be creatable in an existing folder and accept
     files (:class:`lonlib.storage.store.DataWriteError` otherwise; on Dask, every worker checks it

@@ -2,12 +2,13 @@
 
 A neutral-network view of "same behaviour, different weights" (README, "Behaviours"):
 accepted optima of one p with the same label (:mod:`lonlib.task.behaviour`) whose fitness values
-are equal within the LON's tolerance (chained: sorted values closer than the tolerance to
-their neighbour join, as the CMLON's contraction chains equal edges) become one node, and so
-do rejected optima among themselves; optima without a label are never merged. A transition
-between two members of one node becomes a self-return of that node; transitions between
-nodes are summed. The result is a LON graph like :func:`lonlib.lon.graphs.build_lon`'s, so every
-metric of :mod:`lonlib.lon.metrics`, the MLON and the CMLON apply to it unchanged.
+are equal within the LON's fitness tolerance (``fitness_tolerance``; chained: sorted values
+closer than it to their neighbour join, as the CMLON's contraction chains equal edges)
+become one node, and so do rejected optima among themselves; optima without a label are never
+merged. A transition between two members of one node becomes a self-return of that node;
+transitions between nodes are summed. The result is a LON graph like
+:func:`lonlib.lon.graphs.build_lon`'s, so every metric of :mod:`lonlib.lon.metrics`, the MLON and
+the CMLON apply to it unchanged.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ standard of Ochoa et al. (and of the Python peer library ``lonkit``):
   a sink).
 * **MLON** (monotonic LON): the accepted optima and the non-worsening edges between them.
 * **CMLON** (compressed MLON): every edge of the MLON whose two ends are equal within the
-  tolerance is contracted, repeatedly, until none is left (approximate equality is not
+  fitness tolerance is contracted, repeatedly, until none is left (approximate equality is not
   transitive, so one pass is not enough); a plateau takes the best fitness of its members.
   Edges that end up worsening between plateaus are dropped (counted in
   ``graph.graph["dropped_worsening"]``), so every CMLON edge is improving.
@@ -349,7 +349,7 @@ class GraphArrays:
         return self.accepted & (leaving == 0)
 
     def at_best(self, values: np.ndarray) -> np.ndarray:
-        """Mask of ``values`` equal to the best fitness within the tolerance."""
+        """Mask of ``values`` equal to the best fitness within the fitness tolerance."""
         best = self.best
         if best is None:
             return np.zeros(np.shape(values), bool)

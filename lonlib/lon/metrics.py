@@ -43,7 +43,9 @@ METRICS = (
     Metric("optima", "MLON", "accepted local optima (nodes)", "paper §II-C"),
     Metric("edges", "LON", "distinct transitions between two different optima", "Ochoa et al."),
     Metric("improving", "LON", "edges to a better optimum", "Ochoa et al."),
-    Metric("equal", "LON", "edges to an optimum equal within the tolerance", "Ochoa et al."),
+    Metric(
+        "equal", "LON", "edges to an optimum equal within the fitness tolerance", "Ochoa et al."
+    ),
     Metric("worsening", "LON", "edges to a worse optimum (full LON only)", "Ochoa et al."),
     Metric("self_returns", "LON", "hops that returned to the optimum they left", "lonkit"),
     Metric("sinks", "MLON", "optima without an outgoing edge (ends of monotonic sequences)",
@@ -78,7 +80,7 @@ def lon_metrics(graph: nx.DiGraph) -> dict[str, float]:
     or :func:`~lonlib.lon.graphs.lon_from_transitions`), each on its graph: sizes on the LON, sinks
     on the MLON, funnels and their strength and reach on the CMLON, success and deviation
     on the runs' final optima (``graph.graph["run_ends"]``). "Equal" and "at the best
-    fitness" mean within the graph's tolerance. A ratio whose denominator is zero is NaN
+    fitness" mean within the graph's fitness tolerance. A ratio whose denominator is zero is NaN
     (for instance strengths when no funnel has an incoming edge).
     """
     arrays = graph_arrays(graph)
@@ -146,7 +148,7 @@ def node_metrics(graph: nx.DiGraph) -> pd.DataFrame:
     ``fitness``; ``in_strength`` (summed weight of the edges entering the node: how often
     the search arrived there from another optimum); ``out_degree`` (distinct optima it led
     to); ``self_returns``; ``sink`` (no outgoing non-worsening edge to an accepted optimum);
-    ``best`` (at the best fitness within the tolerance)."""
+    ``best`` (at the best fitness within the fitness tolerance)."""
     arrays = graph_arrays(graph)
     n = len(arrays.names)
     return pd.DataFrame(
