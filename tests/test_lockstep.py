@@ -415,6 +415,7 @@ def test_a_subset_of_a_batch_continues_its_searches_exactly():
         assert not whole.step()
     assert {id(item[0]) for item in whole.pending} >= {id(s) for s in whole.searches}
     part = copy.deepcopy(whole).subset([0, 2])  # nothing shared with the whole
+    full = copy.deepcopy(whole)  # a whole copy: its learner's Adam tables must stay joined
 
     def finish(trainer):
         ended = {}
@@ -423,8 +424,11 @@ def test_a_subset_of_a_batch_continues_its_searches_exactly():
                 ended[tag] = result
         return ended
 
-    got, want = finish(part), finish(whole)
-    assert got.keys() == {"a", "c"}
+    got, copied, want = finish(part), finish(full), finish(whole)
+    assert got.keys() == {"a", "c"} and copied.keys() == {"a", "b", "c"}
+    for tag, result in copied.items():
+        assert result.fitness == want[tag].fitness and result.env_steps == want[tag].env_steps
+        np.testing.assert_array_equal(result.theta, want[tag].theta)
     for tag, result in got.items():
         assert result.fitness == want[tag].fitness and result.env_steps == want[tag].env_steps
         np.testing.assert_array_equal(result.theta, want[tag].theta)
