@@ -449,8 +449,8 @@ MUTANTS = [
     ),
     Mutant(
         SIM,
-        "reward = height.mean(axis=1) + cfg.termination_penalty * terminated",
-        "reward = height.mean(axis=1) + cfg.termination_penalty * truncated",
+        "reward = shaped + cfg.termination_penalty * terminated",
+        "reward = shaped + cfg.termination_penalty * truncated",
         "penalty on truncation",
     ),
     Mutant(
