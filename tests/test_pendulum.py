@@ -73,6 +73,23 @@ def test_energy_is_not_conserved_with_friction():
     assert total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)[0, 0] < e0[0, 0] - 0.01
 
 
+def test_hinge_friction_leaves_a_rod_less_energy_than_no_friction():
+    # The same unpushed, cart-frictionless swing with and without hinge friction: the run
+    # with friction must end with less energy; a friction term of the wrong sign pumps
+    # energy in and ends with more.
+    def final_energy(hinge_friction: float) -> float:
+        cfg = PendulumConfig(
+            n_carts=1, motor="force", cart_friction=0.0, hinge_friction=hinge_friction, substeps=50
+        )
+        sim = CoupledPendulums(cfg)
+        sim.phi[:], sim.phi_dot[:] = math.pi - 0.5, 0.0
+        for _ in range(300):
+            sim.step(np.zeros((1, 1)))
+        return float(total_energy(cfg, sim.x_dot, sim.phi, sim.phi_dot)[0, 0])
+
+    assert final_energy(0.05) < final_energy(0.0) - 0.01
+
+
 def one_cart_sensors(phi=math.pi, x=0.0, v=0.0, w=0.0):
     cfg = PendulumConfig(n_carts=1)
     arr = lambda value: np.array([[value]], dtype=float)  # noqa: E731
