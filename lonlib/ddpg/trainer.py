@@ -46,20 +46,7 @@ import numpy as np
 import torch
 
 from lonlib.ddpg.lean import learner_class
-from lonlib.ddpg.plain_state import (
-    StateLayoutError,
-    TensorReader,
-    config_from_plain,
-    generator_from_state,
-    generator_state,
-    plain_bool,
-    plain_dict,
-    plain_float,
-    plain_int,
-    plain_list,
-    plain_str,
-    short_repr,
-)
+from lonlib.ddpg.plain_state import TensorReader
 from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import (
     EXPLORATION_NOISE,
@@ -72,6 +59,19 @@ from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
 from lonlib.task.policy import NetSpec, actor_spec, critic_spec
 from lonlib.task.rollout import Scoring, score_actors
+from lonlib.util.plain_data import (
+    StateLayoutError,
+    config_from_plain,
+    generator_from_state,
+    generator_state,
+    plain_bool,
+    plain_dict,
+    plain_float,
+    plain_int,
+    plain_list,
+    plain_str,
+    short_repr,
+)
 from lonlib.util.progress import progress_bar
 
 
