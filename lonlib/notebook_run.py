@@ -15,6 +15,9 @@ The same arguments as ``papermill`` with two differences in how the kernel runs:
 
 The engine is also registered with papermill as ``lonlib`` (an entry point), so
 ``papermill.execute_notebook(..., engine_name="lonlib")`` runs notebooks the same way.
+papermill loads its entry points while ``papermill.engines`` is being imported, so this module
+imports papermill only when :class:`TerminalEngine` is first asked for (a module
+``__getattr__``): importing it first, or papermill first, both work.
 """
 
 from __future__ import annotations
@@ -25,7 +28,6 @@ from typing import Any
 import zmq
 from jupyter_client import AsyncKernelManager, KernelManager
 from jupyter_client.kernelspec import KernelSpec
-from papermill.engines import NBClientEngine, papermill_engines
 from traitlets.config import Config
 
 
@@ -93,25 +95,46 @@ def encrypted_kernel_config(config: Config | None = None) -> Config:
     return config
 
 
-class TerminalEngine(NBClientEngine):
+def _terminal_engine() -> type:
     """papermill's nbclient engine with an encrypted kernel connection and the kernel's
-    stderr streamed to the terminal."""
+    stderr streamed to the terminal (built once, on first use)."""
+    from papermill.engines import NBClientEngine  # defined before papermill loads entry points
 
-    @classmethod
-    def execute_managed_notebook(cls, nb_man, kernel_name, **kwargs):
-        """Run the notebook as :class:`NBClientEngine` does, with this engine's defaults."""
-        if kwargs.get("stderr_file") is None:
-            kwargs["stderr_file"] = sys.stderr
-        config = encrypted_kernel_config(kwargs.pop("config", None))
-        return super().execute_managed_notebook(nb_man, kernel_name, config=config, **kwargs)
+    class TerminalEngine(NBClientEngine):
+        """papermill's nbclient engine with an encrypted kernel connection and the kernel's
+        stderr streamed to the terminal."""
+
+        @classmethod
+        def execute_managed_notebook(cls, nb_man, kernel_name, **kwargs):
+            """Run the notebook as :class:`NBClientEngine` does, with this engine's defaults."""
+            if kwargs.get("stderr_file") is None:
+                kwargs["stderr_file"] = sys.stderr
+            config = encrypted_kernel_config(kwargs.pop("config", None))
+            return super().execute_managed_notebook(nb_man, kernel_name, config=config, **kwargs)
+
+    TerminalEngine.__module__ = __name__
+    TerminalEngine.__qualname__ = "TerminalEngine"
+    return TerminalEngine
+
+
+def __getattr__(name: str) -> Any:
+    """``TerminalEngine``, built on first access (see the module docstring)."""
+    if name != "TerminalEngine":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    engine = _terminal_engine()
+    # papermill's first import asks for the engine again (its entry point) before this call
+    # returns: the class that papermill registered is the one kept.
+    return globals().setdefault("TerminalEngine", engine)
 
 
 def main() -> None:
     """Run papermill's command line with :class:`TerminalEngine` as the default engine."""
     from papermill.cli import papermill
+    from papermill.engines import papermill_engines
 
-    papermill_engines.register(None, TerminalEngine)
-    papermill_engines.register("lonlib", TerminalEngine)
+    engine = __getattr__("TerminalEngine")
+    papermill_engines.register(None, engine)
+    papermill_engines.register("lonlib", engine)
     papermill(prog_name="papermill")
 
 

@@ -328,9 +328,8 @@ def resolves(name: str) -> bool:
     return False
 
 
-# lonlib.notebook_run is papermill's "lonlib" engine (an entry point): imported before
-# papermill, papermill's import loads the entry point from the half-imported module and
-# fails. It is imported the way it runs, after papermill.
+# Imported as `make reproduce` runs it: papermill first, then its "lonlib" engine (either
+# order works; tests/test_notebook_run.py checks both).
 importlib.import_module("papermill")
 NAMES = documented_names()
 

@@ -2,6 +2,7 @@
 whatever ``python3`` kernelspec file Jupyter finds first, and the terminal gets no warning."""
 
 import json
+import subprocess
 import sys
 
 import nbformat
@@ -89,3 +90,19 @@ def test_only_this_interpreters_ipykernel_counts_as_this_ipykernel():
     assert not runs_this_ipykernel(["/opt/other/python", "-m", "ipykernel_launcher"])
     assert not runs_this_ipykernel(["python", "-m", "other_kernel"])
     assert not runs_this_ipykernel([])
+
+
+@pytest.mark.parametrize(
+    "first, second",
+    [("lonlib.notebook_run", "papermill.engines"), ("papermill.engines", "lonlib.notebook_run")],
+)
+def test_the_engine_imports_in_either_order_and_papermill_registers_the_same_class(first, second):
+    code = (
+        f"import {first}, {second}; import lonlib.notebook_run as run, papermill.engines as pe; "
+        "engine = run.TerminalEngine; "
+        "assert pe.papermill_engines.get_engine('lonlib') is engine, 'two classes'; "
+        "assert issubclass(engine, pe.NBClientEngine); print(engine.__qualname__)"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "TerminalEngine"
