@@ -335,11 +335,16 @@ MUTANTS = [
     ),
     Mutant(
         BH,
-        "rng = np.random.default_rng(seeds.perturbation)",
-        "rng = np.random.default_rng(seeds.local_search)",
+        "rng = np.random.default_rng(trial_seeds(run_seed, index).perturbation)",
+        "rng = np.random.default_rng(trial_seeds(run_seed, index).local_search)",
         "perturbation shares DDPG's stream",
     ),
-    Mutant(BH, "parent = state.incumbent_index", "parent = index - 1", "wrong parent"),
+    Mutant(
+        BH,
+        "parent = -1 if incumbent is None else state.incumbent_index",
+        "parent = -1 if incumbent is None else index - 1",
+        "wrong parent",
+    ),
     Mutant(BH, "improved=optimum.improved,", "improved=True,", "every trial marked improved"),
     Mutant(
         BH,
@@ -525,6 +530,18 @@ MUTANTS = [
         "offsets = np.repeat(nominal_offsets(config, seed or 0), batch_size, axis=1)",
         "offsets = np.repeat(nominal_offsets(config, 0), batch_size, axis=1)",
         "one-rollout: evaluate ignores its seed",
+    ),
+    Mutant(
+        VERIFY,
+        'if not _same(row["start_fitness"], score):',
+        'if not _same(row["start_fitness"], row["start_fitness"]):',
+        "verify never compares a start fitness",
+    ),
+    Mutant(
+        VERIFY,
+        "stored = read_optimum(optimum_path(folder, p, run, parent))",
+        "stored = read_optimum(optimum_path(folder, p, run, max(parent - 1, 0)))",
+        "verify rebuilds a start from another parent",
     ),
 ]
 

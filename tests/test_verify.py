@@ -17,7 +17,7 @@ def test_a_fresh_experiment_replays_every_stored_number(tiny_experiment, capsys)
     _, out, trials = tiny_experiment
     report = verify_experiment(out)
     assert report.ok and report.findings == []
-    assert report.trials == report.replayed == len(trials)
+    assert report.trials == report.replayed == report.starts == len(trials)
     cli_main(["verify", str(out)])
     assert "verify: OK" in capsys.readouterr().out
 
@@ -238,3 +238,23 @@ def test_an_end_step_that_cannot_carry_the_fitness_is_an_error(damaged):
     rewrite(folder, float(scored.p), int(scored.run), damage)
     found = {(f.check, f.index) for f in verify_experiment(folder).errors}
     assert ("consistency", int(scored["index"])) in found
+
+
+def test_a_start_fitness_that_its_rebuilt_start_does_not_score_is_an_error(damaged):
+    """The first search starts from the run's random Actor, a later one from its stored
+    parent perturbed with the trial's stream: a changed start fitness, or a parent that is
+    not the one the search started from, is named."""
+    folder, trials = damaged
+    run = trials[(trials.parent >= 0)].iloc[0]
+    p, r = float(run.p), int(run.run)
+    own = trials[(trials.p == p) & (trials.run == r)].set_index("index")
+    later = next(i for i in own.index if own.parent[i] > 0)  # its grandparent scores less
+    assert own.fitness[own.parent[own.parent[later]]] != own.start_fitness[later]
+
+    def damage(table):
+        table.loc[table["index"] == 0, "start_fitness"] += 0.025
+        table.loc[table["index"] == later, "parent"] = int(own.parent[own.parent[later]])
+
+    rewrite(folder, p, r, damage)
+    found = {(f.check, f.index) for f in verify_experiment(folder, recordings=False).errors}
+    assert ("start", 0) in found and ("start", later) in found

@@ -10,6 +10,10 @@ checks, exactly (bit for bit, no tolerance):
   describe the scored episode, and the stored label is that descriptor's label;
 * ``consistency``: ``b_fitness`` equals ``fitness`` (nominal estimate) and the end step can
   carry the fitness (``fitness_all <= end_step / steps``);
+* ``start``: the stored ``start_fitness`` is what the search's start scores: the run's random
+  initial Actor for its first search, else the stored parent optimum perturbed with the
+  trial's own stream (:func:`lonlib.search.algorithm.search_start`), so the *improved on
+  start* counts replay too;
 * ``recording``: every ``recordings/*.rrd`` names a stored trial (p, run, index) in its
   ``optimum`` property, carries that trial's fitness, and its Actor replays to it.
 
@@ -31,10 +35,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lonlib.search.algorithm import random_parameters, search_start
 from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.store import CorruptDataError, optimum_path, read_manifest, read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
 from lonlib.task.policy import actor_spec
+from lonlib.task.rollout import score_actors
 
 __all__ = ["Finding", "VerifyReport", "verify_experiment"]
 
@@ -62,6 +68,7 @@ class VerifyReport:
     folder: Path
     trials: int = 0  # trials in the experiment
     replayed: int = 0  # trials whose Actor was stored and replayed
+    starts: int = 0  # trials whose start was rebuilt and scored
     recordings: int = 0  # recordings checked
     current_version: bool = True  # every session ran the current result-path version
     findings: list[Finding] = field(default_factory=list)
@@ -89,7 +96,7 @@ class VerifyReport:
         """A few lines for the terminal: what was checked and what did not hold."""
         lines = [
             f"{self.folder}: {self.trials} trials, {self.replayed} replayed from their stored "
-            f"Actor, {self.recordings} recordings"
+            f"Actor, {self.starts} starts rebuilt and scored, {self.recordings} recordings"
         ]
         if not self.current_version:
             lines.append(
@@ -172,6 +179,7 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
             report.findings.extend(_check_trial(row, descriptor, scoring.estimate, mismatch))
             replayed[(float(row["p"]), int(row["run"]), int(row["index"]))] = descriptor
         report.replayed += len(chunk)
+    _check_starts(folder, config, trials, report, mismatch, batch)
     if recordings:
         _check_recordings(folder, trials, replayed, report, mismatch)
     return report
@@ -274,6 +282,52 @@ def _check_trial(
             f"fitness {row['fitness']:.4f} cannot come from an episode that ended at step "
             f"{int(end_step)} of {int(steps)}",
         )
+
+
+def _check_starts(folder: Path, config, trials: pd.DataFrame, report, mismatch, batch) -> None:
+    """Rebuild every search's start (the run's random Actor, or the stored parent optimum
+    perturbed with the trial's stream) and check its score is the stored ``start_fitness``.
+    A trial whose parent optimum is not stored, or that stored no start fitness (older
+    data), is skipped."""
+    if "start_fitness" not in trials.columns:
+        return
+    size = actor_spec(config.env.n_carts).n_params
+    starts, rows = [], []
+    for row in trials.to_dict("records"):
+        if not _number(row["start_fitness"]):
+            continue
+        p, run, parent = float(row["p"]), int(row["run"]), int(row["parent"])
+        incumbent = None
+        if parent >= 0:
+            try:
+                stored = read_optimum(optimum_path(folder, p, run, parent))
+            except (OSError, CorruptDataError):
+                continue  # the actor check names a missing or damaged file
+            incumbent = (np.asarray(stored.theta), np.asarray(stored.omega))
+        run_seed = config.run_seed(p, run)
+        initial = random_parameters(run_seed, config.env.n_carts)
+        theta = search_start(run_seed, int(row["index"]), p, incumbent, initial)[0]
+        if theta.shape != (size,) or not np.isfinite(theta).all():
+            continue  # the parent is unusable: the actor check names it
+        starts.append(theta)
+        rows.append(row)
+    scoring = config.ddpg.scoring
+    for first in range(0, len(rows), batch):
+        scores = score_actors(np.stack(starts[first : first + batch]), config.env, scoring)
+        for row, score in zip(rows[first : first + batch], scores.fitness, strict=True):
+            if not _same(row["start_fitness"], score):
+                report.findings.append(
+                    Finding(
+                        mismatch,
+                        "start",
+                        float(row["p"]),
+                        int(row["run"]),
+                        int(row["index"]),
+                        f"stored start fitness {row['start_fitness']!r}, the rebuilt start "
+                        f"(parent {int(row['parent'])}) scores {float(score)!r}",
+                    )
+                )
+        report.starts += len(rows[first : first + batch])
 
 
 def _check_recordings(folder, trials, replayed, report, mismatch) -> None:

@@ -10,20 +10,17 @@ from typing import Any
 
 import numpy as np
 
-from lonlib.search.algorithm import BasinHoppingRun, RunState
+from lonlib.search.algorithm import BasinHoppingRun, RunState, random_parameters
 from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.inflight import Plan
 from lonlib.storage.layout import MANIFEST_LOCK, RUN_LOCK  # noqa: F401  (MANIFEST_LOCK: re-exported)
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.store import load_run_state, read_manifest, remove_temporary_files, run_dir
-from lonlib.task.policy import actor_spec, critic_spec
 
 
 def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np.ndarray, ...]:
     """Algorithm 2's random initial Actor and Critic for run ``(p, run)``."""
-    rng = np.random.default_rng([config.run_seed(p, run), 1])
-    n = config.env.n_carts
-    return actor_spec(n).initial(rng), critic_spec(n).initial(rng)
+    return random_parameters(config.run_seed(p, run), config.env.n_carts)
 
 
 def run_lock_path(out: Path, p: float, run: int) -> Path:

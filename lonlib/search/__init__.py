@@ -16,6 +16,8 @@ from lonlib.search.algorithm import (
     non_deteriorating,
     perturb,
     perturb_parameters,
+    random_parameters,
+    search_start,
     trial_seeds,
 )
 
@@ -35,5 +37,7 @@ __all__ = [
     "non_deteriorating",
     "perturb",
     "perturb_parameters",
+    "random_parameters",
+    "search_start",
     "trial_seeds",
 ]

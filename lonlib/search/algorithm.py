@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.util.validation import check_field_types, check_range
 
 
@@ -165,6 +166,30 @@ def trial_seeds(run_seed: int, index: int) -> TrialSeeds:
     )
 
 
+def random_parameters(run_seed: int, n_carts: int) -> tuple[np.ndarray, np.ndarray]:
+    """Algorithm 2's random initial Actor and Critic of the run seeded ``run_seed``."""
+    rng = np.random.default_rng([run_seed, 1])
+    return actor_spec(n_carts).initial(rng), critic_spec(n_carts).initial(rng)
+
+
+def search_start(
+    run_seed: int,
+    index: int,
+    perturbation: float,
+    incumbent: tuple[np.ndarray, np.ndarray] | None,
+    initial: tuple[np.ndarray, np.ndarray],
+    take_step: TakeStep = perturb_parameters,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The Actor and Critic that trial ``index`` of a run starts from: ``initial`` while the
+    run has no ``incumbent``, else ``take_step`` of the incumbent's parameters with the
+    trial's perturbation stream (:func:`trial_seeds`). What a run asks for and what
+    ``lonlib verify`` replays."""
+    if incumbent is None:
+        return initial
+    rng = np.random.default_rng(trial_seeds(run_seed, index).perturbation)
+    return take_step(incumbent[0], incumbent[1], perturbation, rng)
+
+
 @dataclass(frozen=True)
 class SearchRequest:
     """The next local search a run asks for: trial ``index`` from ``theta``/``omega``
@@ -215,14 +240,16 @@ class BasinHoppingRun:
         state = self.state
         index = len(state.trials)
         seeds = trial_seeds(self.run_seed, index)
-        if state.incumbent is None:
-            theta, omega, parent = self.initial[0], self.initial[1], -1
-        else:
-            rng = np.random.default_rng(seeds.perturbation)
-            theta, omega = self.take_step(
-                state.incumbent.theta, state.incumbent.omega, self.config.perturbation, rng
-            )
-            parent = state.incumbent_index
+        incumbent = state.incumbent
+        theta, omega = search_start(
+            self.run_seed,
+            index,
+            self.config.perturbation,
+            None if incumbent is None else (incumbent.theta, incumbent.omega),
+            self.initial,
+            self.take_step,
+        )
+        parent = -1 if incumbent is None else state.incumbent_index
         return SearchRequest(index, parent, theta, omega, seeds.local_search)
 
     def record(self, request: SearchRequest, optimum: LocalOptimum, seconds: float) -> Trial:
