@@ -108,6 +108,7 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
     data["sessions"].append(
         {
             **first,
+            "versions": data["versions"],  # a later session records its own
             "cpu": {**first["cpu"], "torch": "AVX512"},
             "environment": {"installed_sha256": "x"},
         }
@@ -117,6 +118,18 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
     assert report.ok
     messages = [f.message for f in report.warnings if f.check == "provenance"]
     assert len(messages) == 2 and any("torch CPU kernels" in m for m in messages)
+    (environment,) = [m for m in messages if "environment" in m]
+    assert "same versions in all" in environment  # numpy, torch and python agree
+
+    data["sessions"][-1] = {**first, "versions": {**data["versions"], "numpy": "0.0"}}
+    data["sessions"][-1]["environment"] = {"installed_sha256": "x"}
+    manifest.write_text(json.dumps(data))
+    (environment,) = [
+        f.message
+        for f in verify_experiment(folder, recordings=False).warnings
+        if f.check == "provenance"
+    ]
+    assert "may differ" in environment and "same versions" not in environment
 
 
 @pytest.fixture(scope="module")

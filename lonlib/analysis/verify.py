@@ -109,6 +109,11 @@ class VerifyReport:
         return "\n".join(lines)
 
 
+NUMERIC_PACKAGES = ("python", "numpy", "torch")
+"""The recorded versions a local search's numbers depend on (the provenance warning says
+whether they agree when the installed sets differ)."""
+
+
 def session_versions(folder: Path) -> list[str | None]:
     """The result-path version each session of an experiment recorded (None: unrecorded)."""
     sessions = read_manifest(folder).get("sessions", [])
@@ -118,7 +123,13 @@ def session_versions(folder: Path) -> list[str | None]:
 def _provenance_findings(folder: Path) -> list[Finding]:
     """Warnings for sessions that ran another environment (lock hash or installed set) or
     other torch CPU kernels than the others: training may then differ in the last bits."""
-    sessions = read_manifest(folder).get("sessions", [])
+    manifest = read_manifest(folder)
+    sessions = manifest.get("sessions", [])
+    # the creating session's versions are the manifest's own
+    versions = [
+        s.get("versions") or (manifest.get("versions") if i == 0 else None)
+        for i, s in enumerate(sessions)
+    ]
     facts = {
         "environment (lock or installed packages)": [
             (s.get("environment") or {}).get("installed_sha256") for s in sessions
@@ -126,9 +137,26 @@ def _provenance_findings(folder: Path) -> list[Finding]:
         "torch CPU kernels": [(s.get("cpu") or {}).get("torch") for s in sessions],
     }
     out = []
+    environments = facts["environment (lock or installed packages)"]
+    numeric = {  # per environment, the versions training depends on, where recorded
+        environment: {
+            tuple(v.get(name) for name in NUMERIC_PACKAGES)
+            for v, e in zip(versions, environments, strict=True)
+            if e == environment and v
+        }
+        for environment in set(environments) - {None}
+    }
+    numeric_agree = all(numeric.values()) and len(set().union(*numeric.values())) == 1
     for what, values in facts.items():
         recorded = [v for v in values if v is not None]
         if len(set(recorded)) > 1:
+            same = what.startswith("environment") and numeric_agree
+            consequence = (
+                f"the packages training depends on ({', '.join(NUMERIC_PACKAGES)}) have the "
+                "same versions in all of them, so only a change outside those could matter"
+                if same
+                else "their runs may differ from a single-session run in the last bits of training"
+            )
             out.append(
                 Finding(
                     "warning",
@@ -137,8 +165,7 @@ def _provenance_findings(folder: Path) -> list[Finding]:
                     None,
                     None,
                     f"sessions ran with {len(set(recorded))} different {what} "
-                    f"({', '.join(sorted(str(v)[:12] for v in set(recorded)))}): their runs may "
-                    "differ from a single-session run in the last bits of training",
+                    f"({', '.join(sorted(str(v)[:12] for v in set(recorded)))}): {consequence}",
                 )
             )
     return out
