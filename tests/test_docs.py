@@ -98,6 +98,10 @@ def test_the_site_builds_offline_and_strict(tmp_path):
     site = tmp_path / "site"
     assert (site / "api" / "ddpg" / "index.html").read_text().count("doc-heading") > 10
     assert (site / "reference-figures" / "fig3_lon_p=0.0001.png").exists()
+    # docstrings' Sphinx roles are code, and link to the API entry they name (docs_hooks.py)
+    api = {page.parent.name: page.read_text() for page in (site / "api").glob("*/index.html")}
+    assert not [name for name, html in api.items() if re.search(r":(class|func|meth):<", html)]
+    assert 'href="../ddpg/#lonlib.ddpg.trainer.SlotTrainer"><code>' in api["calibration"]
     for page in site.rglob("*.html"):  # nothing is fetched from elsewhere when a page opens
         assert "fonts.googleapis" not in page.read_text(), page
 
