@@ -203,12 +203,6 @@ MUTANTS = [
         "a split batch judges the other part's queued policies",
     ),
     Mutant(
-        LEAN,
-        "self._coefficients_host = self._coefficients.numpy()",
-        "self._coefficients_host = self._coefficients.numpy().copy()",
-        "a restored batch's Adam step sizes stop following its step counts",
-    ),
-    Mutant(
         LOCKSTEP,
         "if slot is None or run.driver.finished or len(run.driver.state.trials) != trials:",
         "if slot is None or run.driver.finished:",
