@@ -134,11 +134,13 @@ MUTANTS = [
         "self.add(obs, actions, outcome.reward, next_obs, outcome.terminated | outcome.truncated)",
         "truncations stored as terminations",
     ),
-    Mutant(REPLAY, "row[:, -1] = ~terminated", "row[:, -1] = terminated", "not_done inverted"),
     Mutant(
-        REPLAY,
-        "row[:, o + a + 1 : 2 * o + a + 1] = next_obs",
-        "row[:, o + a + 1 : 2 * o + a + 1] = obs",
+        REPLAY, "outcome[:, -1] = ~terminated", "outcome[:, -1] = terminated", "not_done inverted"
+    ),
+    Mutant(
+        DDPG,
+        "self.replay.add_step(self._obs, actions, outcome, next_obs)",
+        "self.replay.add_step(self._obs, actions, outcome, self.obs)",
         "next state not stored",
     ),
     Mutant(
@@ -161,8 +163,9 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "REPLAY_SAMPLES, self.steps, hp.batch_size, self.replay.size",
-        "REPLAY_SAMPLES, self.steps + np.arange(self.slots), hp.batch_size, self.replay.size",
+        "REPLAY_SAMPLES, self._device_steps, hp.batch_size, self.replay.size",
+        "REPLAY_SAMPLES, self._device_steps + torch.arange(self.slots), hp.batch_size,"
+        " self.replay.size",
         "replay samples depend on the slot (K-dependent)",
     ),
     Mutant(
