@@ -20,7 +20,8 @@ from lonlib.ddpg.devices import (
     to_device,
     to_host,
 )
-from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_device
+from lonlib.ddpg.streams import EXPLORATION_NOISE, WARMUP_ACTIONS, CounterStreams
+from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_device, exploration_actions
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 
@@ -241,6 +242,31 @@ def test_the_devices_counters_follow_the_hosts_through_refills_stops_and_shrinks
         if not batch.busy.any():
             break
     assert starts == 4 and ended >= 4 and batch.slots < 3
+
+
+def test_a_search_acts_uniformly_in_its_warm_up_then_by_its_actor_with_noise(device_mode):
+    hp = dataclasses.replace(HP, warmup_steps=20)
+    batch = trainer(2, hp)
+    thetas, omegas = initial_parameters(1)
+    seeds = [10, 11]
+    sent = []
+    step = batch.sim.step
+    batch.sim.step = lambda actions: sent.append(actions) or step(actions)
+    for count in range(30):
+        if count == 6:  # slot 1 restarts: its warm-up ends 6 steps after slot 0's
+            batch.drop([1])
+            batch.start([1], thetas, omegas, [12], ["late"])
+            seeds[1] = 12
+        streams = CounterStreams(seeds)
+        counters = batch.steps.copy()
+        uniform = streams.uniform(WARMUP_ACTIONS, counters, 1).numpy()
+        mu = batch.learner.act(torch.from_numpy(batch.obs))
+        noise = streams.normal(EXPLORATION_NOISE, counters, 1)
+        explore = exploration_actions(mu, noise, hp.noise_std).numpy()
+        batch.step()
+        want = np.where((counters < hp.warmup_steps)[:, None], uniform, explore)
+        np.testing.assert_array_equal(sent[-1], want)
+    assert len({tuple(row) for row in sent[-1]}) == 2
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
