@@ -36,3 +36,16 @@ def tiny_experiment(tmp_path_factory):
     config = load_config(write_tiny_yaml(folder))
     trials = run_experiment(config, folder / "out", progress=False)
     return config, folder / "out", trials
+
+
+@pytest.fixture(params=["cpu", "cpu as device"])
+def device_mode(request):
+    """Each test twice: on the CPU as it is, and with the CPU taking every path a CUDA
+    device takes (:func:`lonlib.ddpg.devices.cpu_as_device`, for objects made in the test)."""
+    from lonlib.ddpg.devices import cpu_as_device
+
+    if request.param == "cpu":
+        yield request.param
+    else:
+        with cpu_as_device():
+            yield request.param

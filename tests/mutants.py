@@ -48,11 +48,13 @@ ROLLOUT, NETS, PMATH = (
 )
 BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/storage/configs.py", "lonlib/experiment/checkpoints.py"
+DEVICES = "lonlib/ddpg/devices.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
-    DDPG: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
+    DDPG: ["tests/test_ddpg.py", "tests/test_devices.py", "tests/test_lockstep.py"],
     REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
-    STREAMS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
+    STREAMS: ["tests/test_random_streams.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
+    DEVICES: ["tests/test_devices.py", "tests/test_random_streams.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py"],
     CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
     CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
@@ -134,11 +136,13 @@ MUTANTS = [
         "self.add(obs, actions, outcome.reward, next_obs, outcome.terminated | outcome.truncated)",
         "truncations stored as terminations",
     ),
-    Mutant(REPLAY, "row[:, -1] = ~terminated", "row[:, -1] = terminated", "not_done inverted"),
     Mutant(
-        REPLAY,
-        "row[:, o + a + 1 : 2 * o + a + 1] = next_obs",
-        "row[:, o + a + 1 : 2 * o + a + 1] = obs",
+        REPLAY, "outcome[:, -1] = ~terminated", "outcome[:, -1] = terminated", "not_done inverted"
+    ),
+    Mutant(
+        DDPG,
+        "self.replay.add_step(self._obs, actions, outcome, next_obs)",
+        "self.replay.add_step(self._obs, actions, outcome, self.obs)",
         "next state not stored",
     ),
     Mutant(
@@ -161,8 +165,9 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "REPLAY_SAMPLES, self.steps, hp.batch_size, self.replay.size",
-        "REPLAY_SAMPLES, self.steps + np.arange(self.slots), hp.batch_size, self.replay.size",
+        "REPLAY_SAMPLES, self._device_steps, hp.batch_size, self.replay.size",
+        "REPLAY_SAMPLES, self._device_steps + torch.arange(self.slots), hp.batch_size,"
+        " self.replay.size",
         "replay samples depend on the slot (K-dependent)",
     ),
     Mutant(
@@ -203,12 +208,6 @@ MUTANTS = [
         "a split batch judges the other part's queued policies",
     ),
     Mutant(
-        LEAN,
-        "self._coefficients_host = self._coefficients.numpy()",
-        "self._coefficients_host = self._coefficients.numpy().copy()",
-        "a restored batch's Adam step sizes stop following its step counts",
-    ),
-    Mutant(
         LOCKSTEP,
         "if slot is None or run.driver.finished or len(run.driver.state.trials) != trials:",
         "if slot is None or run.driver.finished:",
@@ -225,6 +224,104 @@ MUTANTS = [
         'for prefix, ours, theirs in (("", hp, hp_theirs), ("env.", env_config, env_theirs)):',
         'for prefix, ours, theirs in (("env.", env_config, env_theirs),):',
         "a batch trained with other DDPG settings (threads, device) is resumed",
+    ),
+    # --- DDPG on a device: state kept there, copies through lonlib.ddpg.devices, and the
+    # branches a CUDA device takes (reached on the CPU by the tests' cpu_as_device)
+    Mutant(
+        LEAN,
+        "torch.clamp(self.adam_steps, max=ADAM_TABLE_STEPS, out=self._table_rows)",
+        "torch.clamp(self.adam_steps - 1, min=1, max=ADAM_TABLE_STEPS, out=self._table_rows)",
+        "device: Adam's bias corrections a step behind",
+    ),
+    Mutant(
+        LEAN,
+        "self.adam_steps.copy_(to_device(steps, self.device, torch.int64))",
+        "pass",
+        "device: a restored batch restarts its Adam step counts",
+    ),
+    Mutant(
+        LEAN,
+        "        self.adam_steps[agent] = 0\n",
+        "",
+        "device: a refilled slot goes on with the previous search's Adam step count",
+    ),
+    Mutant(
+        LEAN,
+        "out.adam_steps.copy_(self.adam_steps[rows])",
+        "pass",
+        "device: a shed batch restarts its Adam step counts",
+    ),
+    Mutant(
+        REPLAY,
+        "self.position.add_(1).remainder_(self.capacity)",
+        "self.position.add_(1).clamp_(max=self.capacity - 1)",
+        "device: the replay ring does not wrap",
+    ),
+    Mutant(
+        REPLAY,
+        "self.size.add_(1).clamp_(max=self.capacity)",
+        "self.size.add_(1)",
+        "device: a slot's fill level passes its capacity",
+    ),
+    Mutant(
+        DDPG,
+        "        self._device_steps += self._device_busy\n",
+        "",
+        "device: the device's step counters stand still",
+    ),
+    Mutant(
+        DDPG,
+        "self.loss_sum[:, to_device(index, self.device)] = 0.0\n        self._counters_to_device()",
+        "self.loss_sum[:, to_device(index, self.device)] = 0.0",
+        "device: a refilled slot's counters on the device are the previous search's",
+    ),
+    Mutant(
+        DDPG,
+        "            self._obs.copy_(device_next_obs)",
+        "            pass",
+        "device: the Actor acts on the device's stale observations",
+    ),
+    Mutant(
+        DDPG,
+        "        copy_to_device(self.obs, self._obs)\n\n    def _end_episodes",
+        "\n    def _end_episodes",
+        "device: reset observations never reach the device",
+    ),
+    Mutant(
+        DDPG,
+        "mask = self._device_busy & (self._device_steps >= hp.warmup_steps)",
+        "mask = self._device_busy & (self._device_steps > hp.warmup_steps)",
+        "device: the loss sums miss a search's first update",
+    ),
+    Mutant(
+        DDPG,
+        "actions = torch.where((steps < warmup)[:, None], actions, explore)",
+        "actions = torch.where((steps <= warmup)[:, None], actions, explore)",
+        "device: one more uniform warm-up action",
+    ),
+    Mutant(
+        STREAMS,
+        "return (x >> bits) & ((1 << (64 - bits)) - 1)",
+        "return x >> bits",
+        "device: the torch hash shifts arithmetically",
+    ),
+    Mutant(
+        STREAMS,
+        "self._words = _HOST_WORDS if is_host(self.device) else _TorchWords(self.device)",
+        "self._words = _HOST_WORDS",
+        "device: a device's streams hash on the host",
+    ),
+    Mutant(
+        DEVICES,
+        'return torch.device(device).type == "cpu" and not _CPU_AS_DEVICE',
+        'return torch.device(device).type == "cpu"',
+        "device: the tests' switch leaves the CPU the host",
+    ),
+    Mutant(
+        DEVICES,
+        'return tensor.detach().to("cpu", copy=True).numpy()',
+        "return tensor.detach().cpu().numpy()",
+        "device: to_host shares the CPU's memory",
     ),
     # --- DDPG: what F returns
     Mutant(

@@ -156,13 +156,29 @@ def test_only_a_true_end_is_stored_as_terminal_and_truncation_bootstraps():
         end_reason=np.zeros(3, dtype=np.int8),
     )
     obs = np.random.default_rng(0).uniform(size=(3, 10)).astype(np.float32)
-    replay.add_step(obs, np.full((3, 1), 0.7), outcome, obs + 1)
+    actions = torch.full((3, 1), 0.7, dtype=torch.float64)  # s and a: on the device already
+    stored_next = replay.add_step(torch.from_numpy(obs), actions, outcome, obs + 1)
+    np.testing.assert_array_equal(stored_next.numpy(), obs + 1)
     s, a, r, s2, not_done = replay.sample(np.zeros((3, 1), dtype=np.int64))
     assert not_done[:, 0, 0].tolist() == [0.0, 1.0, 1.0]
     np.testing.assert_allclose(r[:, 0, 0], [0.1, 0.2, 0.3], rtol=1e-6)
     np.testing.assert_allclose(s2[:, 0].numpy(), obs + 1)
     np.testing.assert_allclose(s[:, 0].numpy(), obs)
     np.testing.assert_allclose(a[:, 0, 0], 0.7, rtol=1e-6)
+
+
+def test_each_slot_is_a_ring_of_its_capacity_that_a_clear_empties():
+    replay = ReplayBuffer(2, 4, obs_size=1, act_size=1, device=torch.device("cpu"))
+    for step in range(6):
+        obs, actions = torch.full((2, 1), float(step)), torch.zeros(2, 1, dtype=torch.float64)
+        ends = np.zeros(2, dtype=bool)
+        replay.add(obs, actions, np.zeros(2), np.full((2, 1), step + 1.0), ends)
+    assert replay.size.tolist() == [4, 4] and replay.position.tolist() == [2, 2]
+    s, *_, s2, _ = replay.sample(torch.arange(4).repeat(2, 1))
+    assert s[0, :, 0].tolist() == [4.0, 5.0, 2.0, 3.0]  # steps 4 and 5 overwrote rows 0, 1
+    assert s2[1, :, 0].tolist() == [5.0, 6.0, 3.0, 4.0]
+    replay.clear(1)
+    assert replay.size.tolist() == [4, 0] and replay.position.tolist() == [2, 0]
 
 
 def test_exploration_noise_has_the_configured_standard_deviation_and_is_clipped():

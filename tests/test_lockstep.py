@@ -65,7 +65,10 @@ def serial(tmp_path_factory):
 
 
 @pytest.mark.parametrize("slots", [3, 8])  # one slot: the resume test below
-def test_lockstep_trials_equal_the_serial_executors_bit_for_bit(serial, tmp_path, slots):
+def test_lockstep_trials_equal_the_serial_executors_bit_for_bit(
+    serial, tmp_path, slots, device_mode
+):
+    # "cpu as device": the batch takes a CUDA device's paths, the serial runs the CPU's
     run_experiment(CONFIG, tmp_path, progress=False, executor="lockstep", slots=slots)
     trials, digest = stored(tmp_path)
     want_trials, want_digest = serial
@@ -264,7 +267,7 @@ def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
 
 
 def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
-    serial, tmp_path, monkeypatch, caplog
+    serial, tmp_path, monkeypatch, caplog, device_mode
 ):
     import lonlib.experiment.checkpoints
     from lonlib.experiment.checkpoints import inflight_checkpoints
@@ -401,7 +404,7 @@ def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
     assert not inflight_checkpoints(tmp_path)  # the parts left behind went with their runs
 
 
-def test_a_subset_of_a_batch_continues_its_searches_exactly():
+def test_a_subset_of_a_batch_continues_its_searches_exactly(device_mode):
     from lonlib.ddpg.trainer import SlotTrainer
     from lonlib.task.policy import actor_spec, critic_spec
 

@@ -4,22 +4,20 @@ import numpy as np
 import pytest
 import torch
 
+from lonlib.ddpg.devices import cpu_as_device
 from lonlib.ddpg.streams import (
     EXPLORATION_NOISE,
     REPLAY_SAMPLES,
     START_NOISE,
     WARMUP_ACTIONS,
     CounterStreams,
-    _TorchWords,
 )
 
 
 def torch_backend(seeds):
     """Streams computed with the torch int64 backend (what CUDA uses) on the CPU."""
-    streams = CounterStreams(seeds)
-    streams._words = _TorchWords(torch.device("cpu"))
-    streams._keys = streams._words.keys(streams.seeds)
-    return streams
+    with cpu_as_device():
+        return CounterStreams(seeds)
 
 
 def test_an_agents_draws_do_not_depend_on_the_batch_or_its_row():
@@ -74,6 +72,23 @@ def test_the_torch_backend_draws_the_same_numbers_as_the_numpy_one():
         cpu.integers(REPLAY_SAMPLES, counters, 11, high),
         emulated.integers(REPLAY_SAMPLES, counters, 11, high),
     )
+    # counters and bounds already on the device (the lockstep step's) draw the same
+    on_device = torch.from_numpy(counters), torch.from_numpy(high)
+    for streams in (cpu, emulated):
+        assert torch.equal(
+            streams.integers(REPLAY_SAMPLES, *on_device[:1], 11, on_device[1]),
+            cpu.integers(REPLAY_SAMPLES, counters, 11, high),
+        )
+
+
+@pytest.mark.parametrize("backend", [CounterStreams, torch_backend])
+def test_numbers_the_host_consumes_are_the_streams_numbers_drawn_on_the_host(backend):
+    streams = backend([4, 2**64 - 3])
+    streams.set_seed(1, 99)
+    counters = np.array([12, 2**33])
+    host = streams.host_uniform(START_NOISE, counters, 8)
+    assert isinstance(host, np.ndarray) and host.dtype == np.float64
+    np.testing.assert_array_equal(host, streams.uniform(START_NOISE, counters, 8).numpy())
 
 
 @pytest.mark.parametrize("seed", [-1, 2**64, 1.5, True, "7"])

@@ -1,6 +1,17 @@
 """DDPG as the local search F(theta, omega, e, h): networks, random streams, replay buffers,
-the reference and the lean learner, the slot trainer (torch)."""
+the reference and the lean learner, the slot trainer, their host-device copies (torch)."""
 
+from lonlib.ddpg.devices import (
+    Transfer,
+    TransferLog,
+    copy_to_device,
+    cpu_as_device,
+    host_tensor,
+    host_view,
+    is_host,
+    to_device,
+    to_host,
+)
 from lonlib.ddpg.lean import (
     ADAM_TABLE_STEPS,
     BETAS,
@@ -100,6 +111,8 @@ __all__ = [
     "START_NOISE",
     "SlotTrainer",
     "TensorReader",
+    "Transfer",
+    "TransferLog",
     "WARMUP_ACTIONS",
     "actor_spec",
     "autograd_update",
@@ -107,11 +120,16 @@ __all__ = [
     "check_device",
     "check_parameters",
     "check_seed",
+    "copy_to_device",
+    "cpu_as_device",
     "critic_spec",
     "ddpg_local_search",
     "exploration_actions",
     "forward_numpy",
     "greedy_scores",
+    "host_tensor",
+    "host_view",
+    "is_host",
     "is_improvement",
     "learner_class",
     "local_optimum",
@@ -119,4 +137,6 @@ __all__ = [
     "local_search_batch",
     "make_learner",
     "row_width",
+    "to_device",
+    "to_host",
 ]

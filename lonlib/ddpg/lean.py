@@ -18,12 +18,16 @@ is its own. What makes it lean (one update is 82 tensor operations, no autograd 
 * **activations are kept feature-major** ``[k, features, B]`` and reused by the backward
   pass (the sigmoid's derivative is ``s (1 - s)``), every buffer is preallocated and every
   step writes in place;
-* **per-agent Adam step counts**, so one agent's slot can be reset and reused.
+* **per-agent Adam step counts**, so one agent's slot can be reset and reused; they and the
+  bias-corrected Adam coefficients (gathered from a table by step) live on the device, so an
+  update copies nothing between host and device.
 
 Parameters enter and leave in the paper's flat order (Eq. 1, :class:`lonlib.task.policy.NetSpec`);
 the internal layout differs only by a permutation (bias columns; the critic's first layer
 reads ``(a, s)`` instead of ``(s, a)`` so the actor's input ``s`` sits in the same buffer).
-Everything is a device-agnostic torch tensor: the same code runs on CPU and CUDA.
+Everything is a device-agnostic torch tensor: the same code runs on CPU and CUDA, with no
+branch by device; parameters cross between host and device only through
+:mod:`lonlib.ddpg.devices` (in :meth:`LeanDDPG.actor_flat` and the like).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from typing import Protocol
 import numpy as np
 import torch
 
+from lonlib.ddpg.devices import to_device, to_host
 from lonlib.ddpg.reference import AutogradDDPG
 from lonlib.ddpg.streams import SIMD_PAD
 from lonlib.storage.configs import LEARNERS
@@ -80,8 +85,8 @@ class _Layout:
 
     spec: NetSpec
     blocks: tuple[tuple[int, int, int], ...]  # (start, out, in + 1) per layer
-    to_paper: torch.Tensor  # internal index of every Eq. 1 entry: paper = internal[to_paper]
-    to_internal: torch.Tensor  # paper index of every internal entry: internal = paper[...]
+    to_paper: np.ndarray  # internal index of every Eq. 1 entry: paper = internal[to_paper]
+    to_internal: np.ndarray  # paper index of every internal entry: internal = paper[...]
 
     @classmethod
     def of(cls, spec: NetSpec, first_columns: np.ndarray | None = None) -> _Layout:
@@ -98,12 +103,7 @@ class _Layout:
             blocks.append((start, fan_out, fan_in + 1))
             start += fan_out * (fan_in + 1)
         paper = np.concatenate(to_paper)
-        return cls(
-            spec,
-            tuple(blocks),
-            torch.as_tensor(paper),
-            torch.as_tensor(np.argsort(paper)),
-        )
+        return cls(spec, tuple(blocks), paper, np.argsort(paper))
 
     def views(self, flat: torch.Tensor) -> list[torch.Tensor]:
         """Per-layer ``[m, out, in + 1]`` views of flat vectors ``[m, P]``."""
@@ -160,19 +160,19 @@ class LeanDDPG:
         self.critic_grad = torch.zeros_like(omegas)
         self.actor_moments = torch.zeros(2, *thetas.shape, device=self.device)
         self.critic_moments = torch.zeros(2, *omegas.shape, device=self.device)
-        self.steps = np.zeros(k, dtype=np.int64)  # Adam steps per agent (host side)
-        # Per-agent Adam coefficients [sqrt(bias correction 2), -lr / bias correction 1],
-        # computed in float64 like torch.optim.Adam, by step (index 0 unused).
+        self.adam_steps = torch.zeros(k, dtype=torch.int64, device=self.device)  # per agent
+        # Adam coefficients [sqrt(bias correction 2), -lr / bias correction 1] by step (index
+        # 0 unused), computed in float64 like torch.optim.Adam, gathered per agent each update.
         steps = np.arange(ADAM_TABLE_STEPS + 1, dtype=np.float64)
         with np.errstate(divide="ignore"):
-            self._adam_table = np.stack(
+            table = np.stack(
                 [np.sqrt(1.0 - BETAS[1] ** steps), -learning_rate / (1.0 - BETAS[0] ** steps)]
             ).astype(np.float32)
-        self._coefficients_host = np.zeros((2, k, 1), dtype=np.float32)
-        host = torch.from_numpy(self._coefficients_host)
-        self._coefficients = host if self.device.type == "cpu" else host.to(self.device)
+        self._adam_table = to_device(table, self.device)
+        self._table_rows = torch.zeros(k, dtype=torch.int64, device=self.device)
+        self._coefficients = torch.zeros(2, k, 1, device=self.device)
         self._bias_correction, self._step_size = self._coefficients.unbind(0)
-        self._eps = torch.tensor(EPS, device=self.device)
+        self._eps = torch.full((), EPS, device=self.device)
         self._adam_views = [
             (params, grad, *moments, torch.empty_like(grad))
             for params, grad, moments in (
@@ -195,24 +195,25 @@ class LeanDDPG:
             self._actor_online, act_input, self._hidden(self.actor_layout, k, 1, act_size)
         )
 
-    def __setstate__(self, state: dict) -> None:
-        """A copy (``copy.deepcopy``): on the CPU the host Adam coefficients are the device
-        tensor's memory, which copying separates, so join them again."""
-        self.__dict__.update(state)
-        if self._coefficients.device.type == "cpu":
-            self._coefficients_host = self._coefficients.numpy()
-
     # ----------------------------------------------------------------- parameters in and out
+    @property
+    def steps(self) -> np.ndarray:
+        """The agents' Adam step counts ``[k]`` (int64; a copy from the device)."""
+        return to_host(self.adam_steps)
+
     def _internal(self, layout: _Layout, flat: np.ndarray) -> torch.Tensor:
-        flat = torch.as_tensor(np.asarray(flat, dtype=np.float32))
+        """Host parameters ``[k, P]`` in Eq. 1 order, on the device in the internal order."""
+        flat = np.asarray(flat, dtype=np.float32)
         if flat.ndim != 2 or flat.shape[1] != layout.spec.n_params:
             raise ValueError(
                 f"parameters must be [k, {layout.spec.n_params}], got {tuple(flat.shape)}"
             )
-        return flat[:, layout.to_internal].contiguous().to(self.device)
+        return to_device(flat.take(layout.to_internal, axis=1), self.device)
 
     def _paper(self, layout: _Layout, flat: torch.Tensor) -> np.ndarray:
-        return flat.index_select(1, layout.to_paper.to(flat.device)).cpu().numpy()
+        """Device parameters ``[k, P]`` in the internal order, on the host in Eq. 1 order
+        (C-contiguous: checkpoints store it as it is)."""
+        return to_host(flat).take(layout.to_paper, axis=1)
 
     def actor_flat(self) -> np.ndarray:
         """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order)."""
@@ -253,7 +254,7 @@ class LeanDDPG:
         )
         for target, layout, name in pairs:
             target.copy_(self._internal(layout, state[name]))
-        self.steps[:] = steps
+        self.adam_steps.copy_(to_device(steps, self.device, torch.int64))
 
     def reset_agent(self, agent: int, theta: np.ndarray, omega: np.ndarray) -> None:
         """Restart slot ``agent`` from ``theta``/``omega``: targets copied from them, Adam
@@ -266,13 +267,13 @@ class LeanDDPG:
         self.critic_params[:, agent] = omega
         self.actor_moments[:, agent] = 0.0
         self.critic_moments[:, agent] = 0.0
-        self.steps[agent] = 0
+        self.adam_steps[agent] = 0
 
     def select(self, index: list[int]) -> LeanDDPG:
         """A learner of only the agents at ``index``, in that order: parameters, targets,
         Adam moments and step counts carried over exactly (a batch that sheds finished
         agents computes the others bit for bit as before)."""
-        rows = torch.as_tensor(index, device=self.device)
+        rows = to_device(index, self.device, torch.int64)
         out = LeanDDPG(
             self.actor_layout.spec,
             self.critic_layout.spec,
@@ -285,7 +286,7 @@ class LeanDDPG:
         )
         for name in ("actor_params", "critic_params", "actor_moments", "critic_moments"):
             getattr(out, name).copy_(getattr(self, name)[:, rows])
-        out.steps[:] = self.steps[index]
+        out.adam_steps.copy_(self.adam_steps[rows])
         return out
 
     # ---------------------------------------------------------------------------- buffers
@@ -328,7 +329,7 @@ class LeanDDPG:
         self._losses = torch.empty(2, k, 1, 1, device=device)  # sums: (q - y)^2 and q(s, mu)
         self._loss_views = (self._dq, self._dq_rows, *self._losses, self._losses.view(2, k))
         # sums -> means: critic MSE, actor loss -mean Q
-        self._loss_scale = torch.tensor([[1.0 / batch], [-1.0 / batch]], device=device)
+        self._loss_scale = to_device([[1.0 / batch], [-1.0 / batch]], device, torch.float32)
         self._mean_losses = torch.empty(2, k, device=device)
         hidden = [h[:k] for h in critic_h[:-1]]
         dh = [torch.empty(k, out, batch, device=device) for _, out, _ in self.critic_layout.blocks]
@@ -374,7 +375,7 @@ class LeanDDPG:
     def update(self, batch: tuple[torch.Tensor, ...]) -> tuple[np.ndarray, np.ndarray]:
         """One DDPG update of every agent on ``(s, a, r, s', not_done)``, each ``[k, B, .]``;
         returns the per-agent critic and actor losses ``[k]`` (float32)."""
-        losses = self.train(batch).cpu().numpy().copy()  # the buffer is reused next update
+        losses = to_host(self.train(batch))  # a copy: the buffer is reused next update
         return losses[0], losses[1]
 
     def train(self, batch: tuple[torch.Tensor, ...]) -> torch.Tensor:
@@ -418,13 +419,12 @@ class LeanDDPG:
         return torch.mul(losses, self._loss_scale, out=self._mean_losses)
 
     def _next_step(self) -> None:
-        """Advance every agent's Adam step and refresh the bias-corrected coefficients."""
-        self.steps += 1
-        self._coefficients_host[:, :, 0] = self._adam_table[
-            :, np.minimum(self.steps, ADAM_TABLE_STEPS)
-        ]
-        if self._coefficients.device.type != "cpu":
-            self._coefficients.copy_(torch.from_numpy(self._coefficients_host))
+        """Advance every agent's Adam step and gather its bias-corrected coefficients from
+        the table (beyond its last row they no longer change), all on the device."""
+        self.adam_steps += 1
+        torch.clamp(self.adam_steps, max=ADAM_TABLE_STEPS, out=self._table_rows)
+        coefficients = self._coefficients.view(2, self.agents)
+        torch.index_select(self._adam_table, 1, self._table_rows, out=coefficients)
 
     def _adam(
         self,

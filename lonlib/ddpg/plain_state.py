@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from lonlib.ddpg.devices import to_device
 from lonlib.util.plain_data import (  # noqa: F401  (re-exported: the JSON checks lived here)
     StateLayoutError,
     config_from_plain,
@@ -81,7 +82,7 @@ class TensorReader:
         if isinstance(like, np.ndarray):
             dtype = torch.from_numpy(np.empty(0, like.dtype)).dtype
             return self.take_numpy(name, like.shape, dtype, finite)
-        return self.take(name, tuple(like.shape), like.dtype, finite).to(like.device, copy=True)
+        return to_device(self.take(name, tuple(like.shape), like.dtype, finite), like.device)
 
     def finish(self) -> None:
         """Refuse tensors nobody took (a layout this reader does not know)."""

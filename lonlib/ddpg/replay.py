@@ -3,6 +3,9 @@
 A row packs ``(s, a, r, s', 1 - terminated)``, so a minibatch of every agent is one
 ``index_select``. Slots are independent ring buffers: a slot can be emptied and reused by a
 new local search while the others keep their transitions (the lockstep executor).
+Everything lives on the device, the write positions and fill levels too: storing a step
+copies only the environment's outputs ``(r, s', 1 - terminated)`` there; ``s`` and ``a``
+are on the device already (:mod:`lonlib.ddpg.devices`).
 """
 
 from __future__ import annotations
@@ -10,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from lonlib.ddpg.devices import copy_to_device, host_tensor, to_device, to_host
 from lonlib.ddpg.plain_state import StateLayoutError, TensorReader
 from lonlib.task.pendulum import StepResult
 
@@ -30,9 +34,11 @@ class ReplayBuffer:
         self.data = torch.zeros(agents, capacity, width, device=device)
         self.capacity = capacity
         self.device = torch.device(device)
-        self.position = np.zeros(agents, dtype=np.int64)  # next row each slot writes
-        self.size = np.zeros(agents, dtype=np.int64)  # rows each slot holds
-        self._row = np.zeros((agents, width), dtype=np.float32)
+        # the next row each slot writes and the rows it holds, int64 [k] on the device
+        self.position = torch.zeros(agents, dtype=torch.int64, device=device)
+        self.size = torch.zeros(agents, dtype=torch.int64, device=device)
+        self._row = torch.zeros(agents, width, device=device)
+        self._outcome = np.zeros((agents, obs_size + 2), dtype=np.float32)  # (r, s', not done)
         self._agents = torch.arange(agents, device=device)
         self._offsets = self._agents[:, None] * capacity
 
@@ -48,9 +54,9 @@ class ReplayBuffer:
     def select(self, index: list[int]) -> ReplayBuffer:
         """A buffer holding only the slots at ``index``, in that order."""
         out = ReplayBuffer(len(index), self.capacity, self.obs_size, self.act_size, self.device)
-        out.data.copy_(self.data[torch.as_tensor(index, device=self.device)])
-        out.position[:] = self.position[index]
-        out.size[:] = self.size[index]
+        rows = to_device(index, self.device, torch.int64)
+        for name in ("data", "position", "size"):
+            getattr(out, name).copy_(getattr(self, name)[rows])
         return out
 
     def state_tensors(self) -> dict[str, torch.Tensor]:
@@ -58,11 +64,12 @@ class ReplayBuffer:
         slot's rows in use one slot after another (``[sum(size), width]``). Rows past a
         slot's fill level are left from an earlier search and never read, so they are not
         kept."""
-        rows = torch.cat([self.data[i, :n] for i, n in enumerate(self.size.tolist())])
+        size = to_host(self.size)
+        rows = torch.cat([self.data[i, :n] for i, n in enumerate(size.tolist())])
         return {
-            "position": torch.from_numpy(self.position.copy()),
-            "size": torch.from_numpy(self.size.copy()),
-            "rows": rows.cpu(),  # cat made it: its own storage
+            "position": host_tensor(to_host(self.position)),
+            "size": host_tensor(size),
+            "rows": host_tensor(to_host(rows)),
         }
 
     @classmethod
@@ -89,46 +96,53 @@ class ReplayBuffer:
         width = row_width(obs_size, act_size)
         rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32, finite=True)
         out = cls(agents, capacity, obs_size, act_size, device)  # allocated once all fit
-        for i, part in enumerate(torch.split(rows, size.tolist())):
-            out.data[i, : size[i]] = part.to(out.device)
-        out.position[:], out.size[:] = position, size
+        for i, part in enumerate(torch.split(to_device(rows, out.device), size.tolist())):
+            out.data[i, : size[i]] = part
+        out.position, out.size = to_device(position, out.device), to_device(size, out.device)
         return out
 
     def add_step(
-        self, obs: np.ndarray, actions: np.ndarray, outcome: StepResult, next_obs: np.ndarray
-    ) -> None:
-        """Store one environment step of every agent. Only a true end of the task
-        (collision, tether, boundary) is stored as terminal; reaching the step limit is a
-        truncation, and the target still bootstraps from its next state."""
-        self.add(obs, actions, outcome.reward, next_obs, outcome.terminated)
+        self, obs: torch.Tensor, actions: torch.Tensor, outcome: StepResult, next_obs: np.ndarray
+    ) -> torch.Tensor:
+        """Store one environment step of every agent (``obs``, ``actions`` on the device;
+        the environment's ``outcome`` and ``next_obs`` on the host). Only a true end of the
+        task (collision, tether, boundary) is stored as terminal; reaching the step limit is
+        a truncation, and the target still bootstraps from its next state. Returns
+        :meth:`add`'s ``s'`` on the device."""
+        return self.add(obs, actions, outcome.reward, next_obs, outcome.terminated)
 
     def add(
         self,
-        obs: np.ndarray,
-        actions: np.ndarray,
+        obs: torch.Tensor,
+        actions: torch.Tensor,
         rewards: np.ndarray,
         next_obs: np.ndarray,
         terminated: np.ndarray,
-    ) -> None:
-        """Store one transition per agent (arrays with a leading agent dimension), each at
-        its slot's own position: one host-to-device copy and one indexed write."""
+    ) -> torch.Tensor:
+        """Store one transition per agent (a leading agent dimension), each at its slot's
+        own position: ``s`` and ``a`` are device tensors, the rest (the environment's
+        outputs) host arrays that cross in one copy. Returns the stored ``s'`` on the device
+        ``[k, o]`` (a view, valid until the next call)."""
         o, a = self.obs_size, self.act_size
+        outcome = self._outcome  # the row's tail (r, s', not done), packed on the host
+        outcome[:, 0] = rewards
+        outcome[:, 1 : o + 1] = next_obs
+        outcome[:, -1] = ~terminated
         row = self._row
         row[:, :o] = obs
         row[:, o : o + a] = actions
-        row[:, o + a] = rewards
-        row[:, o + a + 1 : 2 * o + a + 1] = next_obs
-        row[:, -1] = ~terminated
-        position = torch.from_numpy(self.position).to(self.device, non_blocking=True)
-        self.data[self._agents, position] = torch.from_numpy(row).to(self.device)
-        self.position += 1
-        self.position %= self.capacity
-        np.minimum(self.size + 1, self.capacity, out=self.size)
+        copy_to_device(outcome, row[:, o + a :])
+        self.data[self._agents, self.position] = row
+        self.position.add_(1).remainder_(self.capacity)
+        self.size.add_(1).clamp_(max=self.capacity)
+        return row[:, o + a + 1 : 2 * o + a + 1]
 
     def sample(self, indices: torch.Tensor | np.ndarray) -> tuple[torch.Tensor, ...]:
         """Transitions at ``indices [k, batch]`` (agent ``i`` reads only its own buffer):
         ``(s, a, r, s', not_done)``, each ``[k, batch, ...]``."""
-        idx = torch.as_tensor(indices, device=self.device) + self._offsets
+        if not isinstance(indices, torch.Tensor):
+            indices = to_device(indices, self.device, torch.int64)
+        idx = indices + self._offsets
         flat = self.data.view(-1, self.data.shape[-1])
         batch = flat.index_select(0, idx.view(-1)).view(*idx.shape, -1)
         o, a = self.obs_size, self.act_size

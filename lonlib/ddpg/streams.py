@@ -9,8 +9,13 @@ Word ``j`` of step ``c`` for purpose ``q`` of the agent with key ``s`` is a pure
 with ``G = 0x9E3779B97F4A7C15``. Nothing is carried from one draw to the next, so an agent's
 numbers do not depend on how many other agents are drawn with it, in which row it sits, or
 on which device: the hash is exact integer arithmetic, computed with numpy ``uint64`` on the
-CPU (fewer, faster operations than torch there) and with torch ``int64`` on CUDA (two's
-complement wrap-around; logical shifts emulated by masking), bit for bit the same words.
+host (the CPU: fewer, faster operations than torch there) and with torch ``int64`` on a
+device (two's complement wrap-around; logical shifts emulated by masking), bit for bit the
+same words. Which of the two runs is :func:`lonlib.ddpg.devices.is_host`'s to say (the
+CPU takes the device's under the tests' :func:`~lonlib.ddpg.devices.cpu_as_device`). The
+counters may be numpy arrays or tensors on the streams' device (the lockstep step keeps
+them there: no copy per draw); numbers the host consumes (start noise) are drawn on the
+host (:meth:`CounterStreams.host_uniform`).
 This is what lets the lockstep executor train many local searches as one batch and still give
 every run the trials it would get alone, with no Python loop over agents per step.
 
@@ -24,6 +29,8 @@ import math
 
 import numpy as np
 import torch
+
+from lonlib.ddpg.devices import host_tensor, host_view, is_host, to_device
 
 GOLDEN = 0x9E3779B97F4A7C15
 MIX_1 = 0xBF58476D1CE4E5B9
@@ -54,8 +61,13 @@ def check_seed(seed: int) -> int:
     return int(seed)
 
 
+def _numpy(values) -> np.ndarray:
+    """Counters or bounds as numpy: an array as it is, a CPU tensor viewed in place."""
+    return host_view(values) if isinstance(values, torch.Tensor) else np.asarray(values)
+
+
 class _NumpyWords:
-    """The hash on numpy uint64 arrays (CPU)."""
+    """The hash on numpy uint64 arrays (the host)."""
 
     golden, mix_1, mix_2 = np.uint64(GOLDEN), np.uint64(MIX_1), np.uint64(MIX_2)
 
@@ -71,7 +83,7 @@ class _NumpyWords:
         return x ^ (x >> np.uint64(31))
 
     def words(self, keys: np.ndarray, counters: np.ndarray, purpose: int, lanes: int):
-        c = np.asarray(counters).astype(np.uint64)
+        c = _numpy(counters).astype(np.uint64)
         step = self.mix(
             keys + (c * np.uint64(1 << PURPOSE_BITS) + np.uint64(purpose)) * self.golden
         )
@@ -88,7 +100,7 @@ class _NumpyWords:
 
     @staticmethod
     def column(values) -> np.ndarray:
-        return np.asarray(values, dtype=np.int64)[:, None]
+        return _numpy(values).astype(np.int64, copy=False)[:, None]
 
     @staticmethod
     def concat(parts: list[np.ndarray]) -> np.ndarray:
@@ -96,11 +108,14 @@ class _NumpyWords:
 
     @staticmethod
     def tensor(values: np.ndarray, device: torch.device) -> torch.Tensor:
-        return torch.from_numpy(values)
+        return host_tensor(values)
+
+
+_HOST_WORDS = _NumpyWords()
 
 
 class _TorchWords:
-    """The same hash on torch int64 tensors (any device)."""
+    """The same hash on torch int64 tensors (a device)."""
 
     golden, mix_1, mix_2 = _signed(GOLDEN), _signed(MIX_1), _signed(MIX_2)
 
@@ -108,7 +123,14 @@ class _TorchWords:
         self.device = device
 
     def keys(self, seeds: list[int]) -> torch.Tensor:
-        return torch.tensor([_signed(s) for s in seeds], dtype=torch.int64, device=self.device)
+        return to_device([_signed(s) for s in seeds], self.device, torch.int64)
+
+    def on_device(self, values) -> torch.Tensor:
+        """Counters or bounds as an int64 tensor on the device: a tensor (there already)
+        as it is, host values copied."""
+        if isinstance(values, torch.Tensor):
+            return values
+        return to_device(np.asarray(values, dtype=np.int64), self.device)
 
     @staticmethod
     def shift(x: torch.Tensor, bits: int) -> torch.Tensor:
@@ -122,7 +144,7 @@ class _TorchWords:
         return x ^ self.shift(x, 31)
 
     def words(self, keys: torch.Tensor, counters, purpose: int, lanes: int) -> torch.Tensor:
-        c = torch.as_tensor(counters, dtype=torch.int64, device=self.device)
+        c = self.on_device(counters)
         step = self.mix(keys + (c * (1 << PURPOSE_BITS) + purpose) * self.golden)
         offsets = torch.arange(1, lanes + 1, dtype=torch.int64, device=self.device) * self.golden
         return self.mix(step[:, None] + offsets)
@@ -135,7 +157,7 @@ class _TorchWords:
         return words & 0xFFFFFFFF
 
     def column(self, values) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(values), dtype=torch.int64, device=self.device)[:, None]
+        return self.on_device(values)[:, None]
 
     @staticmethod
     def concat(parts: list[torch.Tensor]) -> torch.Tensor:
@@ -156,14 +178,18 @@ class CounterStreams:
 
     def __init__(self, seeds: list[int], device: str | torch.device = "cpu") -> None:
         self.device = torch.device(device)
-        self._words = _NumpyWords() if self.device.type == "cpu" else _TorchWords(self.device)
+        self._words = _HOST_WORDS if is_host(self.device) else _TorchWords(self.device)
         self.seeds = [check_seed(s) for s in seeds]
+        self._set_keys()
+
+    def _set_keys(self) -> None:
         self._keys = self._words.keys(self.seeds)
+        self._host_keys = _HOST_WORDS.keys(self.seeds)
 
     def set_seed(self, agent: int, seed: int) -> None:
         """Give slot ``agent`` the stream of ``seed``."""
         self.seeds[agent] = check_seed(seed)
-        self._keys = self._words.keys(self.seeds)
+        self._set_keys()
 
     def select(self, index: list[int]) -> CounterStreams:
         """The streams of the agents at ``index`` (same seeds, fewer rows)."""
@@ -176,6 +202,12 @@ class CounterStreams:
         """Uniforms in [0, 1), float64 ``[k, lanes]`` (53 random bits each)."""
         top = self._words.top(self._draw(purpose, counters, lanes), 53)
         return self._words.tensor(top, self.device).double() * 2.0**-53
+
+    def host_uniform(self, purpose: int, counters: np.ndarray, lanes: int) -> np.ndarray:
+        """:meth:`uniform`'s numbers computed on the host as a float64 numpy array (for
+        numbers the host consumes: no round trip through the device)."""
+        words = _HOST_WORDS.words(self._host_keys, counters, purpose, lanes)
+        return _HOST_WORDS.top(words, 53).astype(np.float64) * 2.0**-53
 
     def normal(self, purpose: int, counters, lanes: int) -> torch.Tensor:
         """Standard normals, float64 ``[k, lanes]`` (Box-Muller on two uniforms per lane)."""

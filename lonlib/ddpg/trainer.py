@@ -31,6 +31,12 @@ comes from its own counter-based stream (:mod:`lonlib.ddpg.streams`), so an agen
 is bit for bit the same alone, batched with others, or in any slot, and a slot whose search
 ended can be refilled with a new one (the lockstep executor, :mod:`lonlib.experiment.lockstep`) or
 dropped from the batch (:meth:`SlotTrainer.shrink`).
+
+Steps 1 and 3 run on the learner's device, the environments and the greedy evaluations on
+the host; per step only the actions come to the host and the environment's outputs go to
+the device (:mod:`lonlib.ddpg.devices`). The device keeps its own copy of the slots' step
+counters and busy mask (stream counters, warm-up and training masks), sent at events (a
+search's start or stop, a restore) and advanced by each step as the host's are.
 """
 
 from __future__ import annotations
@@ -45,6 +51,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from lonlib.ddpg.devices import copy_to_device, host_tensor, to_device, to_host
 from lonlib.ddpg.lean import learner_class
 from lonlib.ddpg.plain_state import TensorReader
 from lonlib.ddpg.replay import ReplayBuffer
@@ -317,6 +324,14 @@ class SlotTrainer:
         self.loss_sum = torch.zeros(2, k, dtype=torch.float64, device=self.device)
         self.loss_count = np.zeros(k, dtype=np.int64)
         self.obs = np.zeros((k, self.env_config.observation_size), dtype=np.float32)
+        self._obs = torch.zeros(self.obs.shape, device=self.device)  # the device's copy
+        self._counters_to_device()
+
+    def _counters_to_device(self) -> None:
+        """Send ``steps`` and ``busy`` to the device (after an event changed them; between
+        events each step advances the device's copies as the host's)."""
+        self._device_steps = to_device(self.steps, self.device)
+        self._device_busy = to_device(self.busy, self.device)
 
     @property
     def slots(self) -> int:
@@ -394,7 +409,8 @@ class SlotTrainer:
         self.dirty[index] = False
         # The patience window opens when training starts (the first update).
         self.last_improvement[index] = self.hp.warmup_steps
-        self.loss_sum[:, torch.as_tensor(index, device=self.device)] = 0.0
+        self.loss_sum[:, to_device(index, self.device)] = 0.0
+        self._counters_to_device()
         mask = np.zeros(self.slots, dtype=bool)
         mask[index] = True
         self._reset_environments(mask)
@@ -406,13 +422,14 @@ class SlotTrainer:
         hp = self.hp
         busy = self.busy
         # 1. act: uniform during the warm-up, then the Actor plus clipped Gaussian noise
-        actions = self._actions(self.steps < hp.warmup_steps)
+        actions = self._actions()
         # 2. step every environment and store the transitions
-        outcome = self.sim.step(actions)
+        outcome = self.sim.step(to_host(actions))
         next_obs = self.sim.observe().astype(np.float32)
-        self.replay.add_step(self.obs, actions, outcome, next_obs)
+        device_next_obs = self.replay.add_step(self._obs, actions, outcome, next_obs)
         self.episode_return += outcome.reward
         self.steps += busy
+        self._device_steps += self._device_busy
         # 3. update the slots past their warm-up (one batched update of all slots)
         training = busy & (self.steps >= hp.warmup_steps)
         if training.any():
@@ -420,12 +437,12 @@ class SlotTrainer:
                 search = self.searches[slot]
                 self.learner.reset_agent(slot, search.theta, search.omega)
             indices = self.streams.integers(
-                REPLAY_SAMPLES, self.steps, hp.batch_size, self.replay.size
+                REPLAY_SAMPLES, self._device_steps, hp.batch_size, self.replay.size
             )
             losses = self.learner.train(self.replay.sample(indices))
             self.dirty |= ~training
-            mask = torch.as_tensor(training, device=self.device)
-            self.loss_sum += torch.where(mask, losses.to(self.device, torch.float64), 0.0)
+            mask = self._device_busy & (self._device_steps >= hp.warmup_steps)
+            self.loss_sum += torch.where(mask, losses.double(), 0.0)
             self.loss_count += training
             self.updates += training
         # 4. episode ends: queue the greedy fitness of the trained Actors, reset
@@ -435,6 +452,7 @@ class SlotTrainer:
             self._reset_environments(ended)
         else:
             self.obs = next_obs
+            self._obs.copy_(device_next_obs)
         if len(self.pending) >= self.judge_batch:
             self._judge_pending()
         # stopping rules: patience (counted from the end of the warm-up) or budget
@@ -452,18 +470,18 @@ class SlotTrainer:
         )
         return self.busy & (stale | (self.steps >= hp.max_steps)), stale
 
-    def _actions(self, warm: np.ndarray) -> np.ndarray:
-        """``[K, n]`` actions in [0, 1]: uniform for slots in their warm-up, else the Actor
-        plus N(0, noise_std) noise, clipped; every draw from the slot's own streams."""
-        n = self.n
-        actions = self.streams.uniform(WARMUP_ACTIONS, self.steps, n)
-        if (self.busy & ~warm).any():
-            mu = self.learner.act(torch.as_tensor(self.obs, device=self.device))
-            noise = self.streams.normal(EXPLORATION_NOISE, self.steps, n)
+    def _actions(self) -> torch.Tensor:
+        """``[K, n]`` actions in [0, 1] on the device (float64): uniform for slots in their
+        warm-up, else the Actor plus N(0, noise_std) noise, clipped; every draw from the
+        slot's own streams."""
+        n, steps, warmup = self.n, self._device_steps, self.hp.warmup_steps
+        actions = self.streams.uniform(WARMUP_ACTIONS, steps, n)
+        if (self.busy & (self.steps >= warmup)).any():
+            mu = self.learner.act(self._obs)
+            noise = self.streams.normal(EXPLORATION_NOISE, steps, n)
             explore = exploration_actions(mu, noise, self.hp.noise_std)
-            warm_rows = torch.as_tensor(warm, device=self.device)[:, None]
-            actions = torch.where(warm_rows, actions, explore)
-        return actions.cpu().numpy()
+            actions = torch.where((steps < warmup)[:, None], actions, explore)
+        return actions
 
     def _reset_environments(self, mask: np.ndarray) -> None:
         """Reset the masked environments, each with start noise from its own stream (the
@@ -473,10 +491,11 @@ class SlotTrainer:
             level = np.asarray(self.start_spread, dtype=np.float64).reshape(4, 1, 1)
         noise = None
         if np.any(level > 0):
-            u = self.streams.uniform(START_NOISE, self.episodes, 4 * self.n).cpu().numpy()
+            u = self.streams.host_uniform(START_NOISE, self.episodes, 4 * self.n)
             noise = level * (2.0 * u[mask].reshape(-1, 4, self.n).transpose(1, 0, 2) - 1.0)
         self.sim.reset(mask, noise)
         self.obs = self.sim.observe().astype(np.float32)
+        copy_to_device(self.obs, self._obs)
 
     def _end_episodes(self, ended: np.ndarray) -> None:
         """Record the training episodes that ended and queue their policies for a greedy
@@ -490,9 +509,8 @@ class SlotTrainer:
         if trained[candidate].any():
             flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
         counts = np.maximum(self.loss_count[slots], 1)
-        loss_means = (
-            self.loss_sum[:, torch.as_tensor(slots, device=self.device)].cpu().numpy() / counts
-        )
+        rows = to_device(slots, self.device)
+        loss_means = to_host(self.loss_sum[:, rows]) / counts
         now = time.perf_counter()
         for j, slot in enumerate(slots):
             search = self.searches[slot]
@@ -519,7 +537,7 @@ class SlotTrainer:
         self.episodes[slots] += 1
         self.episode_return[slots] = 0.0
         self.loss_count[slots] = 0
-        self.loss_sum[:, torch.as_tensor(slots, device=self.device)] = 0.0
+        self.loss_sum[:, rows] = 0.0
 
     def _judge_pending(self) -> None:
         """Greedy-evaluate every queued policy in one batched rollout and apply the results
@@ -574,6 +592,7 @@ class SlotTrainer:
             finished.append((search.tag, result))
             self.searches[slot] = None
         self.busy[slots] = False
+        self._counters_to_device()
         return finished
 
     # ------------------------------------------------------------------ checkpoints
@@ -585,7 +604,7 @@ class SlotTrainer:
         if not hasattr(self.learner, "load_state"):
             raise ValueError(f"the {self.hp.update!r} learner cannot be checkpointed; use 'lean'")
         tensors = {f"slots.{name}": _tensor(getattr(self, name)) for name in SLOT_ARRAYS}
-        tensors["slots.loss_sum"] = self.loss_sum.cpu().clone()
+        tensors["slots.loss_sum"] = host_tensor(to_host(self.loss_sum))
         for name, array in self.learner.state().items():
             tensors[f"learner.{name}"] = _tensor(array)
         tensors["learner.adam_steps"] = _tensor(self.learner.steps)
@@ -650,6 +669,7 @@ class SlotTrainer:
             array = reader.take_like(f"sim.{name}", getattr(trainer.sim, name), finite=True)
             setattr(trainer.sim, name, array)
         trainer.sim.rng = generator_from_state(plain["sim_generator"], "trainer.sim_generator")
+        copy_to_device(trainer.obs, trainer._obs)
         trainer.searches, trainer.pending = _searches_from_checkpoint(plain, reader, trainer)
         # JUDGE_BATCH is the most the constructor sets (fewer slots: as many), and a step
         # leaves fewer evaluations queued than that
@@ -661,6 +681,7 @@ class SlotTrainer:
         if not np.array_equal(trainer.busy, [s is not None for s in trainer.searches]):
             raise StateLayoutError("trainer: the busy slots are not the slots with a search")
         _check_counters(trainer)
+        trainer._counters_to_device()
         return trainer
 
     # ------------------------------------------------------------------ fewer slots
@@ -680,6 +701,7 @@ class SlotTrainer:
         for slot in slots:
             self.searches[slot] = None
             self.busy[slot] = False
+        self._counters_to_device()
 
     def subset(self, slots: Sequence[int]) -> SlotTrainer:
         """A new trainer of only ``slots``, their searches continuing exactly as here (to
@@ -702,7 +724,9 @@ class SlotTrainer:
         self.pending = [item for item in self.pending if id(item[0]) in kept]
         for name in SLOT_ARRAYS:
             setattr(self, name, getattr(self, name)[keep])
-        self.loss_sum = self.loss_sum[:, torch.as_tensor(keep, device=self.device)]
+        rows = to_device(keep, self.device)
+        self.loss_sum, self._obs = self.loss_sum[:, rows], self._obs[rows]
+        self._counters_to_device()
 
 
 def make_learner(
