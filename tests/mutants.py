@@ -172,8 +172,8 @@ MUTANTS = [
     ),
     Mutant(
         STREAMS,
-        "self.seeds[agent] = check_seed(seed)",
-        "self.seeds[agent] = check_seed(seed) + agent",
+        "            self.seeds[agent] = seed\n",
+        "            self.seeds[agent] = seed + agent\n",
         "a slot's stream depends on the slot",
     ),
     # --- DDPG: lockstep slots
@@ -322,6 +322,12 @@ MUTANTS = [
         'return tensor.detach().to("cpu", copy=True).numpy()',
         "return tensor.detach().cpu().numpy()",
         "device: to_host shares the CPU's memory",
+    ),
+    Mutant(
+        STREAMS,
+        "values.dtype != torch.int64 or not on_device(values, self.device)",
+        "not on_device(values, self.device)",
+        "device: the streams hash int32 counters",
     ),
     # --- DDPG: what F returns
     Mutant(

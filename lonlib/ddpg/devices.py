@@ -121,6 +121,15 @@ def to_host(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().to("cpu", copy=True).numpy()
 
 
+def on_device(tensor: torch.Tensor, device: str | torch.device) -> bool:
+    """Whether ``tensor`` lives on ``device`` (a device without an index, such as
+    ``"cuda"``, stands for any of its kind)."""
+    device = torch.device(device)
+    return tensor.device.type == device.type and (
+        device.index is None or tensor.device.index == device.index
+    )
+
+
 def host_view(tensor: torch.Tensor) -> np.ndarray:
     """A numpy view of a tensor in host memory (:func:`is_host`): no copy, and not a
     transfer (for the code that :func:`is_host` lets compute with numpy)."""
