@@ -52,13 +52,23 @@ DEVICES = "lonlib/ddpg/devices.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_devices.py", "tests/test_lockstep.py"],
-    REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
-    STREAMS: ["tests/test_random_streams.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
+    REPLAY: ["tests/test_devices.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
+    STREAMS: [
+        "tests/test_random_streams.py",
+        "tests/test_devices.py",
+        "tests/test_ddpg.py",
+        "tests/test_lockstep.py",
+    ],
     DEVICES: ["tests/test_devices.py", "tests/test_random_streams.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py"],
     CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
     CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
-    LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py", "tests/test_lockstep.py"],
+    LEAN: [
+        "tests/test_ddpg.py",
+        "tests/test_ddpg_update.py",
+        "tests/test_devices.py",
+        "tests/test_lockstep.py",
+    ],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
     SIM: ["tests/test_pendulum.py", "tests/test_rollout.py"],
@@ -328,6 +338,32 @@ MUTANTS = [
         "values.dtype != torch.int64 or not on_device(values, self.device)",
         "not on_device(values, self.device)",
         "device: the streams hash int32 counters",
+    ),
+    # tensors on the wrong device, waits and copies the CPU's results cannot show: the meta
+    # device, the transfer counts and the crossings guard (tests/test_devices.py) catch them
+    Mutant(
+        DEVICES,
+        "out = torch.tensor(np.asarray(values), dtype=dtype, device=device)",
+        "out = torch.tensor(np.asarray(values), dtype=dtype)",
+        "device: to_device leaves host values on the host",
+    ),
+    Mutant(
+        STREAMS,
+        "return to_device([_signed(s) for s in seeds], self.device, torch.int64)",
+        "return torch.tensor([_signed(s) for s in seeds], dtype=torch.int64)",
+        "device: the stream keys stay on the host",
+    ),
+    Mutant(
+        DDPG,
+        "self._device_busy = to_device(self.busy, self.device)",
+        "self._device_busy = host_tensor(self.busy.copy())",
+        "device: the busy mask stays on the host",
+    ),
+    Mutant(
+        DDPG,
+        "self.loss_sum += torch.where(mask, losses.double(), 0.0)",
+        "self.loss_sum[:, mask] += losses.double()[:, mask]",
+        "device: the loss sums index by a mask (the step waits for the device)",
     ),
     # --- DDPG: what F returns
     Mutant(
