@@ -365,6 +365,20 @@ MUTANTS = [
         "self.loss_sum[:, mask] += losses.double()[:, mask]",
         "device: the loss sums index by a mask (the step waits for the device)",
     ),
+    Mutant(
+        DDPG,
+        "flat_actor, flat_critic = self.learner.actor_flat(rows), self.learner.critic_flat(rows)\n"
+        "        counts",
+        "flat_actor, flat_critic = self.learner.actor_flat()[slots], "
+        "self.learner.critic_flat()[slots]\n        counts",
+        "device: an episode end copies every slot's parameters",
+    ),
+    Mutant(
+        LEAN,
+        "return params if rows is None else params.index_select(0, rows)",
+        "return params",
+        "device: the parameters of every slot come back for some",
+    ),
     # --- DDPG: what F returns
     Mutant(
         DDPG,
@@ -429,7 +443,7 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "                result.omega = flat_critic[slot].copy()\n"
+        "                result.omega = flat_critic[j].copy()\n"
         "                result.final_evaluation = True",
         "                result.omega = self.searches[slot].omega.copy()\n"
         "                result.final_evaluation = True",

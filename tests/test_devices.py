@@ -280,7 +280,7 @@ def test_a_training_step_copies_the_environments_outputs_in_and_the_actions_out(
         assert crossings == []  # nothing else crossed: replay, masks, Adam on the device
 
 
-def test_an_episode_end_copies_the_parameters_loss_sums_and_reset_observations(
+def test_an_episode_end_copies_the_ended_slots_parameters_loss_sums_and_reset_observations(
     device_mode, monkeypatch
 ):
     batch = trainer()
@@ -289,12 +289,13 @@ def test_an_episode_end_copies_the_parameters_loss_sums_and_reset_observations(
     ends = [(t, c) for t, ended, c in steps_with_logs(batch, 150, monkeypatch) if ended]
     assert ends
     for transfers, crossings in ends:
-        ended = transfers[4].shape[0]  # how many episodes ended in that step
+        ended = transfers[2].shape[0]  # how many episodes ended in that step
+        assert 1 <= ended < 3
         assert transfers == [
             ACTIONS,
             OUTCOME,
-            *parameters_back(3),  # every slot's Actor and Critic
             slot_indices(ended),  # the slots whose episodes ended
+            *parameters_back(ended),  # their Actors to judge and their Critics, only theirs
             Transfer("to host", (2, ended), torch.float64),  # their loss sums
             RESET_OBS,
         ]

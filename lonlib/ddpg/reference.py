@@ -50,6 +50,11 @@ def autograd_update(
     return critic_loss.detach().cpu().numpy(), actor_loss.detach().cpu().numpy()
 
 
+def _rows(flat: np.ndarray, rows: torch.Tensor | None) -> np.ndarray:
+    """The rows ``rows`` of host parameters ``flat [k, P]`` (all of them if ``None``)."""
+    return flat if rows is None else flat[rows.cpu().numpy()]
+
+
 class AutogradDDPG:
     """``k`` agents' Actor, Critic, targets and Adam states, updated by :func:`autograd_update`.
 
@@ -113,13 +118,15 @@ class AutogradDDPG:
         with torch.no_grad():
             return self.actor(obs[:, None, :])[:, 0, :]
 
-    def actor_flat(self) -> np.ndarray:
-        """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order)."""
-        return self.actor.flat()
+    def actor_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order), or only the
+        agents at ``rows`` (an int64 index tensor)."""
+        return _rows(self.actor.flat(), rows)
 
-    def critic_flat(self) -> np.ndarray:
-        """Online Critic parameters ``[k, P_critic]`` (float32, Eq. 1 order)."""
-        return self.critic.flat()
+    def critic_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Critic parameters ``[k, P_critic]`` (float32, Eq. 1 order), or only the
+        agents at ``rows``."""
+        return _rows(self.critic.flat(), rows)
 
     def state(self) -> dict[str, np.ndarray]:
         """Every learned quantity as ``[k, P]`` arrays in Eq. 1 order (for comparisons)."""

@@ -505,11 +505,11 @@ class SlotTrainer:
         slots = np.flatnonzero(ended)
         trained = self.updates[slots] > 0
         candidate = trained | hp.count_start
-        flat_actor = flat_critic = None
-        if trained[candidate].any():
-            flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
-        counts = np.maximum(self.loss_count[slots], 1)
         rows = to_device(slots, self.device)
+        flat_actor = flat_critic = None
+        if trained[candidate].any():  # only the ended slots' parameters cross
+            flat_actor, flat_critic = self.learner.actor_flat(rows), self.learner.critic_flat(rows)
+        counts = np.maximum(self.loss_count[slots], 1)
         loss_means = to_host(self.loss_sum[:, rows]) / counts
         now = time.perf_counter()
         for j, slot in enumerate(slots):
@@ -529,7 +529,7 @@ class SlotTrainer:
             search.result.history.append(record)
             if candidate[j]:
                 if trained[j]:
-                    policy = (flat_actor[slot].copy(), flat_critic[slot].copy())
+                    policy = (flat_actor[j].copy(), flat_critic[j].copy())
                 else:
                     policy = (search.theta, search.omega)
                 self.pending.append((search, record, *policy))
@@ -572,13 +572,14 @@ class SlotTrainer:
         slots = np.flatnonzero(stop)
         unjudged = [i for i in slots if self.searches[i].best[0] == -np.inf]
         if unjudged:  # no training episode ended: judge the Actor at the stop
-            flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
-            fitness, returns = greedy_scores(flat_actor[unjudged], self.env_config, self.hp.scoring)
+            rows = to_device(unjudged, self.device)
+            flat_actor, flat_critic = self.learner.actor_flat(rows), self.learner.critic_flat(rows)
+            fitness, returns = greedy_scores(flat_actor, self.env_config, self.hp.scoring)
             for j, slot in enumerate(unjudged):
                 result = self.searches[slot].result
                 result.fitness = float(fitness[j])
-                result.theta = flat_actor[slot].copy()
-                result.omega = flat_critic[slot].copy()
+                result.theta = flat_actor[j].copy()
+                result.omega = flat_critic[j].copy()
                 result.final_evaluation = True
         now = time.perf_counter()
         finished = []
