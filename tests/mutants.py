@@ -281,7 +281,7 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "self.loss_sum[:, to_device(index, self.device)] = 0.0\n        self._counters_to_device()",
+        "self.loss_sum[:, to_device(index, self.device)] = 0.0\n        self._counters_changed()",
         "self.loss_sum[:, to_device(index, self.device)] = 0.0",
         "device: a refilled slot's counters on the device are the previous search's",
     ),
@@ -355,8 +355,8 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "self._device_busy = to_device(self.busy, self.device)",
-        "self._device_busy = host_tensor(self.busy.copy())",
+        "self._device_steps, self._device_busy = counters[0], counters[1].bool()",
+        "self._device_steps, self._device_busy = counters[0], host_tensor(self.busy.copy())",
         "device: the busy mask stays on the host",
     ),
     Mutant(
@@ -378,6 +378,25 @@ MUTANTS = [
         "return params if rows is None else params.index_select(0, rows)",
         "return params",
         "device: the parameters of every slot come back for some",
+    ),
+    Mutant(
+        DDPG,
+        "        self.streams.set_seeds(slots, seeds)\n",
+        "        for slot, seed in zip(slots, seeds, strict=True):\n"
+        "            self.streams.set_seed(slot, seed)\n",
+        "device: a refill sends every stream key once per slot",
+    ),
+    Mutant(
+        DDPG,
+        "        if self._device_steps is None:\n",
+        "        if True:\n",
+        "device: the counters go to the device every step",
+    ),
+    Mutant(
+        DDPG,
+        "        self.busy[slots] = False\n        self._counters_changed()\n",
+        "        self.busy[slots] = False\n",
+        "device: a stopped search's slot stays busy on the device",
     ),
     # --- DDPG: what F returns
     Mutant(

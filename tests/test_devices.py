@@ -302,6 +302,50 @@ def test_an_episode_end_copies_the_ended_slots_parameters_loss_sums_and_reset_ob
         assert crossings == []
 
 
+def test_searches_starting_and_stopping_send_their_keys_parameters_and_counters_once(
+    device_mode, monkeypatch
+):
+    # long episodes: no training episode ends, so a search stops with a final evaluation
+    hp = dataclasses.replace(HP, warmup_steps=10, max_steps=40, min_steps=0)
+    batch = trainer(3, hp)
+    thetas, omegas = initial_parameters(2)
+    keys = [] if device_mode == "cpu" else [Transfer("to device", (3,), torch.int64)]
+    for _ in range(5):
+        batch.step()
+    _, transfers, crossings = logged(monkeypatch, lambda: batch.drop([0, 2]))
+    assert transfers == [] and crossings == []  # the counters wait for the next step
+    _, transfers, crossings = logged(monkeypatch, batch.step)
+    assert transfers == [COUNTERS, ACTIONS, OUTCOME] and crossings == []
+    _, transfers, crossings = logged(
+        monkeypatch, lambda: batch.start([0, 2], thetas, omegas, [20, 21], ["a", "b"])
+    )
+    one_start = [
+        Transfer("to device", (1, A_SIZE), torch.float32),
+        Transfer("to device", (1, C_SIZE), torch.float32),
+    ]
+    assert transfers == [
+        *one_start,  # slot 0's Actor and Critic
+        *one_start,  # slot 2's
+        *keys,  # every slot's stream key, once
+        slot_indices(2),  # the slots whose loss sums restart
+        RESET_OBS,
+    ]
+    assert crossings == []
+    stops, changed = [], True  # the refill changed the counters
+    while batch.busy.any():
+        ended, transfers, crossings = logged(monkeypatch, batch.step)
+        assert transfers[:3] == [COUNTERS, ACTIONS, OUTCOME] if changed else [ACTIONS, OUTCOME]
+        assert transfers.count(COUNTERS) == changed and crossings == []
+        if ended:
+            stops.append((len(ended), transfers))
+        changed = bool(ended)
+    # slot 1 stops first, alone; slots 0 and 2 stop together (no training episode ended:
+    # the Actor at the stop is judged, and only the stopping slots' parameters cross)
+    assert [count for count, _ in stops] == [1, 2]
+    for count, transfers in stops:
+        assert transfers[-3:] == [slot_indices(count), *parameters_back(count)]
+
+
 def test_the_devices_counters_follow_the_hosts_through_refills_stops_and_shrinks(device_mode):
     hp = dataclasses.replace(HP, warmup_steps=20, max_steps=70, min_steps=0, patience_steps=25)
     batch = trainer(3, hp, PendulumConfig(n_carts=1, steps=40))
@@ -310,7 +354,7 @@ def test_the_devices_counters_follow_the_hosts_through_refills_stops_and_shrinks
     for step in range(300):
         ended += len(batch.step())
         free = batch.free_slots()
-        if free and starts < 4:
+        if free and starts < 4 and (step % 3 == 0 or not batch.busy.any()):  # free a while
             batch.start(
                 free[:1],
                 thetas[starts : starts + 1],
@@ -323,6 +367,7 @@ def test_the_devices_counters_follow_the_hosts_through_refills_stops_and_shrinks
             batch.drop([batch.slots - 1])
         if step == 160:
             batch.shrink()
+        batch._counters_to_device()  # what the next step does first
         np.testing.assert_array_equal(to_host(batch._device_steps), batch.steps)
         np.testing.assert_array_equal(to_host(batch._device_busy), batch.busy)
         np.testing.assert_array_equal(to_host(batch._obs), batch.obs)

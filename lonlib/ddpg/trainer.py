@@ -325,13 +325,21 @@ class SlotTrainer:
         self.loss_count = np.zeros(k, dtype=np.int64)
         self.obs = np.zeros((k, self.env_config.observation_size), dtype=np.float32)
         self._obs = torch.zeros(self.obs.shape, device=self.device)  # the device's copy
-        self._counters_to_device()
+        self._counters_changed()
+
+    def _counters_changed(self) -> None:
+        """An event changed ``steps`` or ``busy``: the device's copies are stale until
+        :meth:`_counters_to_device` sends them (the next step does, so a stop followed by a
+        refill sends them once)."""
+        self._device_steps = self._device_busy = None
 
     def _counters_to_device(self) -> None:
-        """Send ``steps`` and ``busy`` to the device (after an event changed them; between
-        events each step advances the device's copies as the host's)."""
-        self._device_steps = to_device(self.steps, self.device)
-        self._device_busy = to_device(self.busy, self.device)
+        """Send ``steps`` and ``busy`` to the device in one copy if an event changed them
+        since they were last sent (between events each step advances the device's copies
+        as the host's)."""
+        if self._device_steps is None:
+            counters = to_device(np.stack([self.steps, self.busy]), self.device)
+            self._device_steps, self._device_busy = counters[0], counters[1].bool()
 
     @property
     def slots(self) -> int:
@@ -383,8 +391,8 @@ class SlotTrainer:
     def _start(self, slots, thetas, omegas, seeds, tags) -> None:
         now = time.perf_counter()
         start_scores = greedy_scores(thetas, self.env_config, self.hp.scoring)
+        self.streams.set_seeds(slots, seeds)
         for j, slot in enumerate(slots):
-            self.streams.set_seed(slot, seeds[j])
             self.replay.clear(slot)
             score = (float(start_scores[0][j]), float(start_scores[1][j]))
             counted = self.hp.count_start
@@ -410,7 +418,7 @@ class SlotTrainer:
         # The patience window opens when training starts (the first update).
         self.last_improvement[index] = self.hp.warmup_steps
         self.loss_sum[:, to_device(index, self.device)] = 0.0
-        self._counters_to_device()
+        self._counters_changed()
         mask = np.zeros(self.slots, dtype=bool)
         mask[index] = True
         self._reset_environments(mask)
@@ -421,6 +429,7 @@ class SlotTrainer:
         ``(tag, result)`` of the searches that ended in this step (their slots are free)."""
         hp = self.hp
         busy = self.busy
+        self._counters_to_device()  # if an event changed them
         # 1. act: uniform during the warm-up, then the Actor plus clipped Gaussian noise
         actions = self._actions()
         # 2. step every environment and store the transitions
@@ -593,7 +602,7 @@ class SlotTrainer:
             finished.append((search.tag, result))
             self.searches[slot] = None
         self.busy[slots] = False
-        self._counters_to_device()
+        self._counters_changed()
         return finished
 
     # ------------------------------------------------------------------ checkpoints
@@ -682,7 +691,7 @@ class SlotTrainer:
         if not np.array_equal(trainer.busy, [s is not None for s in trainer.searches]):
             raise StateLayoutError("trainer: the busy slots are not the slots with a search")
         _check_counters(trainer)
-        trainer._counters_to_device()
+        trainer._counters_changed()
         return trainer
 
     # ------------------------------------------------------------------ fewer slots
@@ -702,7 +711,7 @@ class SlotTrainer:
         for slot in slots:
             self.searches[slot] = None
             self.busy[slot] = False
-        self._counters_to_device()
+        self._counters_changed()
 
     def subset(self, slots: Sequence[int]) -> SlotTrainer:
         """A new trainer of only ``slots``, their searches continuing exactly as here (to
@@ -727,7 +736,7 @@ class SlotTrainer:
             setattr(self, name, getattr(self, name)[keep])
         rows = to_device(keep, self.device)
         self.loss_sum, self._obs = self.loss_sum[:, rows], self._obs[rows]
-        self._counters_to_device()
+        self._counters_changed()
 
 
 def make_learner(
