@@ -398,6 +398,24 @@ MUTANTS = [
         "        self.busy[slots] = False\n",
         "device: a stopped search's slot stays busy on the device",
     ),
+    Mutant(
+        REPLAY,
+        '"rows": host_tensor(to_host(rows, temporary=True)),',
+        '"rows": host_tensor(to_host(rows)),',
+        "device: a checkpoint holds the replay rows twice",
+    ),
+    Mutant(
+        REPLAY,
+        "copy_to_device(part, out.data[i, : len(part)])",
+        "out.data[i, : len(part)] = part",
+        "device: a restore's replay rows cross uncounted",
+    ),
+    Mutant(
+        DEVICES,
+        "if temporary and is_host(tensor.device):",
+        "if temporary:",
+        "device: a temporary's memory is taken over on a device too",
+    ),
     # --- DDPG: what F returns
     Mutant(
         DDPG,

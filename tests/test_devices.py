@@ -5,7 +5,9 @@ an event copies only what it needs, the CPU can take every path a CUDA device ta
 mixed into its operations raises, as it fails or waits on CUDA) every tensor of the
 learner, the replay, the streams and the trainer stays on the device."""
 
+import contextlib
 import dataclasses
+import itertools
 import sys
 
 import numpy as np
@@ -26,6 +28,7 @@ from lonlib.ddpg.devices import (
     to_host,
 )
 from lonlib.ddpg.lean import LeanDDPG
+from lonlib.ddpg.plain_state import TensorReader
 from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import EXPLORATION_NOISE, REPLAY_SAMPLES, WARMUP_ACTIONS, CounterStreams
 from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_device, exploration_actions
@@ -94,6 +97,18 @@ def test_copies_never_share_memory_and_every_one_is_counted():
         host_view(torch.zeros(1, device="meta"))
     with cpu_as_device(), pytest.raises(ValueError, match="host memory"):
         host_view(tensor)  # the CPU is a device now: no view of its memory
+    with pytest.raises(ValueError, match="copies host values"):
+        copy_to_device(torch.zeros(3, device="meta"), out)
+
+
+@pytest.mark.parametrize("host", [True, False])
+def test_a_temporarys_memory_is_taken_over_only_in_host_memory(host):
+    with TransferLog() as log, cpu_as_device() if not host else contextlib.nullcontext():
+        temporary = torch.zeros(3)
+        values = to_host(temporary, temporary=True)
+        values[0] = 1.0
+    assert temporary[0] == (1.0 if host else 0.0)  # a device's is copied, as always
+    assert log.transfers == [Transfer("to host", (3,), torch.float32)]  # counted either way
 
 
 def test_a_cuda_device_is_checked_against_the_devices_torch_sees(monkeypatch):
@@ -423,6 +438,125 @@ def test_on_cuda_a_training_step_makes_one_memcpy_each_way():
     assert steady >= 30
 
 
+# ----------------------------------------------------------------- events: shrink, restore
+def test_a_shrink_copies_only_the_kept_slots(device_mode, monkeypatch):
+    batch = trainer()
+    for _ in range(HP.warmup_steps + 5):
+        batch.step()
+    batch.drop([0])
+    _, transfers, crossings = logged(monkeypatch, batch.shrink)
+    keys = [] if device_mode == "cpu" else [Transfer("to device", (2,), torch.int64)]
+    assert transfers == [
+        slot_indices(2),  # the learner's kept rows
+        *parameters_back(2),  # their Actors and Critics (a new learner is made from them)
+        Transfer("to device", (2, A_SIZE), torch.float32),
+        Transfer("to device", (2, C_SIZE), torch.float32),
+        Transfer("to device", (2, 20_001), torch.float32),  # the new learner's Adam table
+        slot_indices(2),  # the replay's kept rows
+        *keys,  # the kept streams' keys
+        slot_indices(2),  # the loss sums' and observations' kept rows
+    ]
+    assert crossings == []
+
+
+# What a checkpoint does on the host by design: its tensors are CPU tensors, made from
+# host arrays (the counted copies' results among them) and checked on the host when read.
+ON_THE_HOST = {
+    ("from_numpy", "ddpg/trainer.py:_tensor"),
+    ("from_numpy", "ddpg/trainer.py:_rows"),
+    ("tensor", "ddpg/trainer.py:_searches_to_checkpoint"),
+    ("host_tensor from_numpy", "ddpg/trainer.py:to_checkpoint"),
+    ("host_tensor from_numpy", "ddpg/replay.py:state_tensors"),
+    ("__bool__", "ddpg/plain_state.py:take"),
+    ("numpy", "ddpg/plain_state.py:take_numpy"),
+    ("from_numpy", "ddpg/plain_state.py:take_like"),
+}
+
+
+def checkpoint_crossings(calls):
+    """Crossings but those of :data:`ON_THE_HOST`."""
+    return [(name, where) for name, where in calls if (name, *where) not in ON_THE_HOST]
+
+
+def test_a_checkpoint_copies_each_device_tensor_once_and_a_restore_sends_them_back(
+    device_mode, monkeypatch
+):
+    batch = trainer()
+    for _ in range(HP.warmup_steps + 5):
+        batch.step()
+    (plain, tensors), transfers, crossings = logged(monkeypatch, batch.to_checkpoint)
+    params = [(3, A_SIZE)] * 4 + [(3, C_SIZE)] * 4  # online, target, two Adam moments
+    sizes = batch.replay.size.tolist()
+    width = 2 * OBS + ENV.n_carts + 2
+    assert transfers == [
+        Transfer("to host", (2, 3), torch.float64),  # the loss sums
+        *(Transfer("to host", shape, torch.float32) for shape in params),
+        Transfer("to host", (3,), torch.int64),  # Adam step counts
+        Transfer("to host", (3,), torch.int64),  # the replay's fill levels
+        Transfer("to host", (3,), torch.int64),  # and positions
+        Transfer("to host", (sum(sizes), width), torch.float32),  # the rows in use, once
+    ]
+    assert checkpoint_crossings(crossings) == []
+    restored, transfers, crossings = logged(
+        monkeypatch, lambda: SlotTrainer.from_checkpoint(plain, tensors)
+    )
+    keys = [] if device_mode == "cpu" else [Transfer("to device", (3,), torch.int64)]
+    assert transfers == [
+        Transfer("to device", (2, 3), torch.float64),  # the loss sums
+        *(Transfer("to device", shape, torch.float32) for shape in params[::4]),  # made
+        Transfer("to device", (2, 20_001), torch.float32),  # the Adam table
+        *(Transfer("to device", shape, torch.float32) for shape in params),  # loaded
+        Transfer("to device", (3,), torch.int64),  # Adam step counts
+        *(Transfer("to device", (n, width), torch.float32) for n in sizes),  # each slot's rows
+        Transfer("to device", (3,), torch.int64),  # the replay's positions
+        Transfer("to device", (3,), torch.int64),  # and fill levels
+        *keys,
+        Transfer("to device", (3, OBS), torch.float32),  # the observations
+    ]
+    assert checkpoint_crossings(crossings) == []
+    _, transfers, _ = logged(monkeypatch, restored.step)
+    assert transfers[:3] == [COUNTERS, ACTIONS, OUTCOME]
+
+
+def peak_bytes(action) -> int:
+    """The most host memory torch holds at once while ``action()`` runs, beyond what it
+    held before (allocations and frees in time order)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    with profile(activities=[ProfilerActivity.CPU], profile_memory=True) as prof:
+        action()
+    events = sorted(prof.events(), key=lambda event: event.time_range.start)
+    return max(itertools.accumulate(event.self_cpu_memory_usage for event in events))
+
+
+def test_a_replay_checkpoint_holds_its_rows_once_more_not_twice():
+    replay = ReplayBuffer(3, 1000, OBS, ENV.n_carts, torch.device("cpu"))
+    rng = np.random.default_rng(0)
+    for step in range(700):
+        count = 3 - (step >= 500)  # slot 2 stops at 500 rows
+        replay.add(
+            torch.from_numpy(rng.standard_normal((3, OBS), dtype=np.float32)),
+            torch.from_numpy(rng.random((3, 1))),
+            rng.standard_normal(3),
+            rng.standard_normal((3, OBS)),
+            rng.random(3) < 0.1,
+        )
+        if count == 2:
+            replay.position[2], replay.size[2] = 500, 500  # undo slot 2's write
+    rows = replay.state_tensors()["rows"]
+    # the layout of the format: each slot's rows in use one slot after another, its own
+    # contiguous float32 storage
+    want = torch.cat([replay.data[0, :700], replay.data[1, :700], replay.data[2, :500]])
+    assert rows.dtype == torch.float32 and rows.is_contiguous() and torch.equal(rows, want)
+    assert rows.untyped_storage().nbytes() == rows.nbytes
+    assert peak_bytes(replay.state_tensors) < 1.1 * rows.nbytes  # no second copy
+    reader = TensorReader({f"r.{k}": v for k, v in replay.state_tensors().items()})
+    restored = peak_bytes(
+        lambda: ReplayBuffer.from_state(reader, "r.", 3, 1000, OBS, 1, torch.device("cpu"))
+    )
+    assert restored < replay.data.nbytes + 0.1 * rows.nbytes  # the buffer, no copy of the rows
+
+
 # ----------------------------------------------------------------- the meta device
 @pytest.fixture
 def meta(monkeypatch):
@@ -433,9 +567,9 @@ def meta(monkeypatch):
     refuses it outside this fixture)."""
     real = devices.to_host
 
-    def to_host(tensor):
+    def to_host(tensor, temporary=False):
         if tensor.device.type != "meta":
-            return real(tensor)
+            return real(tensor, temporary)
         devices._record("to host", tensor)
         return np.zeros(tuple(tensor.shape), torch.empty(0, dtype=tensor.dtype).numpy().dtype)
 

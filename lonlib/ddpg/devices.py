@@ -106,18 +106,29 @@ def to_device(
     return out
 
 
-def copy_to_device(values: np.ndarray, out: torch.Tensor) -> torch.Tensor:
-    """Write host ``values`` into the device tensor ``out`` (cast to its dtype; no new
-    device memory); returns ``out``. One counted copy."""
-    out.copy_(torch.from_numpy(np.ascontiguousarray(values)))
+def copy_to_device(values: np.ndarray | torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+    """Write host ``values`` (a numpy array or a CPU tensor) into the device tensor ``out``
+    (cast to its dtype; no new device memory); returns ``out``. One counted copy."""
+    if not isinstance(values, torch.Tensor):
+        values = torch.from_numpy(np.ascontiguousarray(values))
+    elif values.device.type != "cpu":
+        raise ValueError(f"copy_to_device copies host values, got a tensor on {values.device}")
+    out.copy_(values)
     _record("to device", out)
     return out
 
 
-def to_host(tensor: torch.Tensor) -> np.ndarray:
+def to_host(tensor: torch.Tensor, temporary: bool = False) -> np.ndarray:
     """The values of a device tensor as a numpy array of their own (never sharing the
-    tensor's memory, on the CPU neither). One counted copy."""
+    tensor's memory, on the CPU neither). One counted copy.
+
+    ``temporary``: the caller made ``tensor`` for this copy alone (a fresh result, no view,
+    held by nothing else), so in host memory (:func:`is_host`) the array takes its memory
+    over instead of copying it: a large export (a checkpoint's replay rows) then holds its
+    values once, not twice. Elsewhere it is copied as always."""
     _record("to host", tensor)
+    if temporary and is_host(tensor.device):
+        return tensor.detach().numpy()
     return tensor.detach().to("cpu", copy=True).numpy()
 
 
