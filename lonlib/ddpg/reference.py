@@ -1,6 +1,11 @@
 """The straightforward DDPG update: autograd through :class:`~lonlib.ddpg.nets.BatchedMLP` and
 ``torch.optim.Adam``. It is the reference the lean learner (:mod:`lonlib.ddpg.lean`) is
 tested against, and stays selectable with ``DDPGConfig(update="autograd")``.
+
+It is outside the device discipline of the lockstep step (:mod:`lonlib.ddpg.devices`, which
+needs the lean learner): it picks fused Adam by device type, copies its losses to the host
+with ``.cpu()`` each update and back with ``torch.as_tensor`` (:meth:`AutogradDDPG.train`),
+and its parameters with ``.cpu()``, by itself and uncounted.
 """
 
 from __future__ import annotations

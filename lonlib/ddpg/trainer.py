@@ -35,8 +35,12 @@ dropped from the batch (:meth:`SlotTrainer.shrink`).
 Steps 1 and 3 run on the learner's device, the environments and the greedy evaluations on
 the host; per step only the actions come to the host and the environment's outputs go to
 the device (:mod:`lonlib.ddpg.devices`). The device keeps its own copy of the slots' step
-counters and busy mask (stream counters, warm-up and training masks), sent at events (a
-search's start or stop, a restore) and advanced by each step as the host's are.
+counters and busy mask (stream counters, warm-up and training masks), advanced by each step
+as the host's are and sent again, in one copy, by the first step after an event changed
+them (a search's start or stop, a drop, a shrink, a restore). An event copies only what its
+slots need: an episode end brings back the Actors and Critics of the slots whose episodes
+ended, selected on the device. That discipline holds with the lean learner, which lockstep
+batches need; the autograd reference learner copies by itself (:mod:`lonlib.ddpg.reference`).
 """
 
 from __future__ import annotations
@@ -216,7 +220,9 @@ def check_batch_size(hp: DDPGConfig, agents: int) -> None:
 
 
 def check_device(device: str) -> None:
-    """Refuse, naming ``device``, a torch device this machine cannot compute on."""
+    """Refuse, naming ``device``, a torch device this machine cannot compute on (asks
+    torch which devices exist: a check on the device outside :mod:`lonlib.ddpg.devices`,
+    made once per batch, never in a step)."""
     kind = torch.device(device)
     if kind.type == "cpu":
         return
