@@ -52,13 +52,23 @@ DEVICES = "lonlib/ddpg/devices.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: ["tests/test_ddpg.py", "tests/test_devices.py", "tests/test_lockstep.py"],
-    REPLAY: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
-    STREAMS: ["tests/test_random_streams.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
+    REPLAY: ["tests/test_devices.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
+    STREAMS: [
+        "tests/test_random_streams.py",
+        "tests/test_devices.py",
+        "tests/test_ddpg.py",
+        "tests/test_lockstep.py",
+    ],
     DEVICES: ["tests/test_devices.py", "tests/test_random_streams.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py"],
     CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
     CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
-    LEAN: ["tests/test_ddpg.py", "tests/test_ddpg_update.py", "tests/test_lockstep.py"],
+    LEAN: [
+        "tests/test_ddpg.py",
+        "tests/test_ddpg_update.py",
+        "tests/test_devices.py",
+        "tests/test_lockstep.py",
+    ],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
     SIM: ["tests/test_pendulum.py", "tests/test_rollout.py"],
@@ -172,8 +182,8 @@ MUTANTS = [
     ),
     Mutant(
         STREAMS,
-        "self.seeds[agent] = check_seed(seed)",
-        "self.seeds[agent] = check_seed(seed) + agent",
+        "            self.seeds[agent] = seed\n",
+        "            self.seeds[agent] = seed + agent\n",
         "a slot's stream depends on the slot",
     ),
     # --- DDPG: lockstep slots
@@ -271,7 +281,7 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "self.loss_sum[:, to_device(index, self.device)] = 0.0\n        self._counters_to_device()",
+        "self.loss_sum[:, to_device(index, self.device)] = 0.0\n        self._counters_changed()",
         "self.loss_sum[:, to_device(index, self.device)] = 0.0",
         "device: a refilled slot's counters on the device are the previous search's",
     ),
@@ -322,6 +332,89 @@ MUTANTS = [
         'return tensor.detach().to("cpu", copy=True).numpy()',
         "return tensor.detach().cpu().numpy()",
         "device: to_host shares the CPU's memory",
+    ),
+    Mutant(
+        STREAMS,
+        "values.dtype != torch.int64 or not on_device(values, self.device)",
+        "not on_device(values, self.device)",
+        "device: the streams hash int32 counters",
+    ),
+    # tensors on the wrong device, waits and copies the CPU's results cannot show: the meta
+    # device, the transfer counts and the crossings guard (tests/test_devices.py) catch them
+    Mutant(
+        DEVICES,
+        "out = torch.tensor(np.asarray(values), dtype=dtype, device=device)",
+        "out = torch.tensor(np.asarray(values), dtype=dtype)",
+        "device: to_device leaves host values on the host",
+    ),
+    Mutant(
+        STREAMS,
+        "return to_device([_signed(s) for s in seeds], self.device, torch.int64)",
+        "return torch.tensor([_signed(s) for s in seeds], dtype=torch.int64)",
+        "device: the stream keys stay on the host",
+    ),
+    Mutant(
+        DDPG,
+        "self._device_steps, self._device_busy = counters[0], counters[1].bool()",
+        "self._device_steps, self._device_busy = counters[0], host_tensor(self.busy.copy())",
+        "device: the busy mask stays on the host",
+    ),
+    Mutant(
+        DDPG,
+        "self.loss_sum += torch.where(mask, losses.double(), 0.0)",
+        "self.loss_sum[:, mask] += losses.double()[:, mask]",
+        "device: the loss sums index by a mask (the step waits for the device)",
+    ),
+    Mutant(
+        DDPG,
+        "flat_actor, flat_critic = self.learner.actor_flat(rows), self.learner.critic_flat(rows)\n"
+        "        counts",
+        "flat_actor, flat_critic = self.learner.actor_flat()[slots], "
+        "self.learner.critic_flat()[slots]\n        counts",
+        "device: an episode end copies every slot's parameters",
+    ),
+    Mutant(
+        LEAN,
+        "return params if rows is None else params.index_select(0, rows)",
+        "return params",
+        "device: the parameters of every slot come back for some",
+    ),
+    Mutant(
+        DDPG,
+        "        self.streams.set_seeds(slots, seeds)\n",
+        "        for slot, seed in zip(slots, seeds, strict=True):\n"
+        "            self.streams.set_seed(slot, seed)\n",
+        "device: a refill sends every stream key once per slot",
+    ),
+    Mutant(
+        DDPG,
+        "        if self._device_steps is None:\n",
+        "        if True:\n",
+        "device: the counters go to the device every step",
+    ),
+    Mutant(
+        DDPG,
+        "        self.busy[slots] = False\n        self._counters_changed()\n",
+        "        self.busy[slots] = False\n",
+        "device: a stopped search's slot stays busy on the device",
+    ),
+    Mutant(
+        REPLAY,
+        '"rows": host_tensor(to_host(rows, temporary=True)),',
+        '"rows": host_tensor(to_host(rows)),',
+        "device: a checkpoint holds the replay rows twice",
+    ),
+    Mutant(
+        REPLAY,
+        "copy_to_device(part, out.data[i, : len(part)])",
+        "out.data[i, : len(part)] = part",
+        "device: a restore's replay rows cross uncounted",
+    ),
+    Mutant(
+        DEVICES,
+        "if temporary and is_host(tensor.device):",
+        "if temporary:",
+        "device: a temporary's memory is taken over on a device too",
     ),
     # --- DDPG: what F returns
     Mutant(
@@ -387,7 +480,7 @@ MUTANTS = [
     ),
     Mutant(
         DDPG,
-        "                result.omega = flat_critic[slot].copy()\n"
+        "                result.omega = flat_critic[j].copy()\n"
         "                result.final_evaluation = True",
         "                result.omega = self.searches[slot].omega.copy()\n"
         "                result.final_evaluation = True",

@@ -106,3 +106,40 @@ def test_no_two_purposes_share_draws_at_nearby_counters():
         for c in range(64)
     }
     assert len(set(words.values())) == len(words)
+
+
+@pytest.mark.parametrize("backend", [CounterStreams, torch_backend])
+def test_counters_and_bounds_as_tensors_must_be_int64_on_the_streams_device(backend):
+    # an int32 tensor would hash other words (c * 2^8 wraps in 32 bits), a tensor on another
+    # device would fail there or be copied each draw
+    streams = backend([1, 2])
+    narrow = torch.tensor([3, 2**30], dtype=torch.int32)
+    with pytest.raises(ValueError, match="counters must be .* int64 tensor on the streams'"):
+        streams.uniform(WARMUP_ACTIONS, narrow, 2)
+    with pytest.raises(ValueError, match="high must be .* got a torch.int32 tensor on cpu"):
+        streams.integers(REPLAY_SAMPLES, np.array([1, 2]), 4, narrow)
+    elsewhere = torch.zeros(2, dtype=torch.int64, device="meta")
+    with pytest.raises(ValueError, match="streams' device cpu, got a torch.int64 tensor on meta"):
+        streams.normal(EXPLORATION_NOISE, elsewhere, 2)
+    wide = narrow.to(torch.int64)  # the same counters as int64: the numpy counters' words
+    assert torch.equal(
+        streams.uniform(WARMUP_ACTIONS, wide, 2),
+        streams.uniform(WARMUP_ACTIONS, wide.numpy(), 2),
+    )
+
+
+@pytest.mark.parametrize("backend", [CounterStreams, torch_backend])
+def test_slots_given_new_seeds_together_draw_as_if_made_with_them(backend):
+    streams = backend([1, 2, 3])
+    streams.set_seeds([2, 0], [30, 10])
+    assert streams.seeds == [10, 2, 30]
+    counters = np.array([4, 5, 6])
+    assert torch.equal(
+        streams.uniform(WARMUP_ACTIONS, counters, 3),
+        backend([10, 2, 30]).uniform(WARMUP_ACTIONS, counters, 3),
+    )
+    with pytest.raises(ValueError, match="2 slots but 1 seeds"):
+        streams.set_seeds([0, 1], [5])
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        streams.set_seeds([0], [-1])
+    assert streams.seeds == [10, 2, 30]  # a refused seed changes nothing

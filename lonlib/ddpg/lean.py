@@ -61,12 +61,13 @@ class Learner(Protocol):
         """Greedy actions ``[k, n]`` for one observation per agent ``[k, o]``."""
         ...
 
-    def actor_flat(self) -> np.ndarray:
-        """Online Actor parameters ``[k, P_actor]`` in Eq. 1 order."""
+    def actor_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Actor parameters ``[k, P_actor]`` in Eq. 1 order (only the agents at
+        ``rows``, an int64 index tensor on the learner's device, if given)."""
         ...
 
-    def critic_flat(self) -> np.ndarray:
-        """Online Critic parameters ``[k, P_critic]`` in Eq. 1 order."""
+    def critic_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Critic parameters ``[k, P_critic]`` in Eq. 1 order (only ``rows``'s)."""
         ...
 
 
@@ -215,13 +216,16 @@ class LeanDDPG:
         (C-contiguous: checkpoints store it as it is)."""
         return to_host(flat).take(layout.to_paper, axis=1)
 
-    def actor_flat(self) -> np.ndarray:
-        """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order)."""
-        return self._paper(self.actor_layout, self.actor_params[1])
+    def actor_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order), or ``[m,
+        P_actor]`` of the agents at ``rows`` (an int64 index tensor ``[m]`` on the device:
+        they are selected there, so only their parameters cross)."""
+        return self._paper(self.actor_layout, _select(self.actor_params[1], rows))
 
-    def critic_flat(self) -> np.ndarray:
-        """Online Critic parameters ``[k, P_critic]`` (float32, Eq. 1 order)."""
-        return self._paper(self.critic_layout, self.critic_params[0])
+    def critic_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Critic parameters ``[k, P_critic]`` (float32, Eq. 1 order), or those of
+        the agents at ``rows`` (as in :meth:`actor_flat`)."""
+        return self._paper(self.critic_layout, _select(self.critic_params[0], rows))
 
     def state(self) -> dict[str, np.ndarray]:
         """Every learned quantity as ``[k, P]`` arrays in Eq. 1 order (for comparisons)."""
@@ -277,8 +281,8 @@ class LeanDDPG:
         out = LeanDDPG(
             self.actor_layout.spec,
             self.critic_layout.spec,
-            self.actor_flat()[index],
-            self.critic_flat()[index],
+            self.actor_flat(rows),
+            self.critic_flat(rows),
             learning_rate=self.learning_rate,
             gamma=self.gamma,
             tau=self.tau,
@@ -454,6 +458,12 @@ class LeanDDPG:
 
 
 _Product = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _select(params: torch.Tensor, rows: torch.Tensor | None) -> torch.Tensor:
+    """The agents' rows ``rows`` of ``params [k, P]`` (all of them if ``None``), on the
+    device."""
+    return params if rows is None else params.index_select(0, rows)
 
 
 def _forward_steps(

@@ -3,7 +3,9 @@
 :class:`BatchedMLP` holds ``k`` independent networks of one shape (``[k, out, in]`` weights)
 so ``k`` agents train in one batched matrix product; ``k = 1`` is the single-agent case. The
 flat parameter layout (paper Eq. 1) and the numpy forward of fixed parameters are
-:mod:`lonlib.task.policy`'s (re-exported here).
+:mod:`lonlib.task.policy`'s (re-exported here). The autograd reference learner's
+(:mod:`lonlib.ddpg.reference`): its parameters cross between host and device directly
+(``torch.as_tensor``, ``.cpu()``), not through :mod:`lonlib.ddpg.devices`.
 """
 
 from __future__ import annotations

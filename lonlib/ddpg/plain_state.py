@@ -5,7 +5,10 @@ with ``torch.load(..., weights_only=True)``, which builds no Python object but t
 containers) and JSON. Neither names a Python class, so reading one runs no code of the file's
 choosing and survives moving or renaming modules. What comes back is still untrusted: these helpers
 check every value's kind, shape and dtype against what the reader expects before anything uses it,
-and raise :class:`StateLayoutError` naming the first that does not fit.
+and raise :class:`StateLayoutError` naming the first that does not fit. The tensors read are
+the file's CPU tensors, checked and converted on the host (``.numpy()``, ``bool``) directly;
+only :meth:`TensorReader.take_like` puts one on a device, through
+:func:`lonlib.ddpg.devices.to_device`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,11 @@
 """The straightforward DDPG update: autograd through :class:`~lonlib.ddpg.nets.BatchedMLP` and
 ``torch.optim.Adam``. It is the reference the lean learner (:mod:`lonlib.ddpg.lean`) is
 tested against, and stays selectable with ``DDPGConfig(update="autograd")``.
+
+It is outside the device discipline of the lockstep step (:mod:`lonlib.ddpg.devices`, which
+needs the lean learner): it picks fused Adam by device type, copies its losses to the host
+with ``.cpu()`` each update and back with ``torch.as_tensor`` (:meth:`AutogradDDPG.train`),
+and its parameters with ``.cpu()``, by itself and uncounted.
 """
 
 from __future__ import annotations
@@ -48,6 +53,11 @@ def autograd_update(
         for net, target_net in ((actor, actor_target), (critic, critic_target)):
             torch._foreach_lerp_(target_net.tensors, net.tensors, tau)
     return critic_loss.detach().cpu().numpy(), actor_loss.detach().cpu().numpy()
+
+
+def _rows(flat: np.ndarray, rows: torch.Tensor | None) -> np.ndarray:
+    """The rows ``rows`` of host parameters ``flat [k, P]`` (all of them if ``None``)."""
+    return flat if rows is None else flat[rows.cpu().numpy()]
 
 
 class AutogradDDPG:
@@ -113,13 +123,15 @@ class AutogradDDPG:
         with torch.no_grad():
             return self.actor(obs[:, None, :])[:, 0, :]
 
-    def actor_flat(self) -> np.ndarray:
-        """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order)."""
-        return self.actor.flat()
+    def actor_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Actor parameters ``[k, P_actor]`` (float32, Eq. 1 order), or only the
+        agents at ``rows`` (an int64 index tensor)."""
+        return _rows(self.actor.flat(), rows)
 
-    def critic_flat(self) -> np.ndarray:
-        """Online Critic parameters ``[k, P_critic]`` (float32, Eq. 1 order)."""
-        return self.critic.flat()
+    def critic_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
+        """Online Critic parameters ``[k, P_critic]`` (float32, Eq. 1 order), or only the
+        agents at ``rows``."""
+        return _rows(self.critic.flat(), rows)
 
     def state(self) -> dict[str, np.ndarray]:
         """Every learned quantity as ``[k, P]`` arrays in Eq. 1 order (for comparisons)."""

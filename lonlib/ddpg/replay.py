@@ -63,13 +63,15 @@ class ReplayBuffer:
         """The buffer as CPU tensors: ``position`` and ``size`` ``[k]`` and ``rows``, each
         slot's rows in use one slot after another (``[sum(size), width]``). Rows past a
         slot's fill level are left from an earlier search and never read, so they are not
-        kept."""
+        kept. The rows are gathered on the device and copied to the host once (on the CPU
+        the gathered tensor is the export: the rows are held twice at most, the buffer and
+        the export, never a third time)."""
         size = to_host(self.size)
         rows = torch.cat([self.data[i, :n] for i, n in enumerate(size.tolist())])
         return {
             "position": host_tensor(to_host(self.position)),
             "size": host_tensor(size),
-            "rows": host_tensor(to_host(rows)),
+            "rows": host_tensor(to_host(rows, temporary=True)),
         }
 
     @classmethod
@@ -84,7 +86,8 @@ class ReplayBuffer:
         device: torch.device,
     ) -> ReplayBuffer:
         """A buffer continuing from :meth:`state_tensors` (names after ``prefix``), every
-        tensor checked against this buffer's layout first (:class:`StateLayoutError`)."""
+        tensor checked against this buffer's layout first (:class:`StateLayoutError`). Each
+        slot's rows are copied straight into the buffer (no copy of all rows first)."""
         position = reader.take_numpy(f"{prefix}position", (agents,), torch.int64)
         size = reader.take_numpy(f"{prefix}size", (agents,), torch.int64)
         # A slot fills from row 0 after each clear, so below capacity it writes at its size.
@@ -96,8 +99,9 @@ class ReplayBuffer:
         width = row_width(obs_size, act_size)
         rows = reader.take(f"{prefix}rows", (int(size.sum()), width), torch.float32, finite=True)
         out = cls(agents, capacity, obs_size, act_size, device)  # allocated once all fit
-        for i, part in enumerate(torch.split(to_device(rows, out.device), size.tolist())):
-            out.data[i, : size[i]] = part
+        for i, part in enumerate(torch.split(rows, size.tolist())):
+            if len(part):
+                copy_to_device(part, out.data[i, : len(part)])
         out.position, out.size = to_device(position, out.device), to_device(size, out.device)
         return out
 

@@ -26,11 +26,12 @@ take 32 bits each (two per word) scaled to the agent's buffer size by integer ar
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import torch
 
-from lonlib.ddpg.devices import host_tensor, host_view, is_host, to_device
+from lonlib.ddpg.devices import host_tensor, host_view, is_host, on_device, to_device
 
 GOLDEN = 0x9E3779B97F4A7C15
 MIX_1 = 0xBF58476D1CE4E5B9
@@ -126,8 +127,8 @@ class _TorchWords:
         return to_device([_signed(s) for s in seeds], self.device, torch.int64)
 
     def on_device(self, values) -> torch.Tensor:
-        """Counters or bounds as an int64 tensor on the device: a tensor (there already)
-        as it is, host values copied."""
+        """Counters or bounds as an int64 tensor on the device: a tensor (there already,
+        checked by :class:`CounterStreams`) as it is, host values copied."""
         if isinstance(values, torch.Tensor):
             return values
         return to_device(np.asarray(values, dtype=np.int64), self.device)
@@ -171,9 +172,10 @@ class _TorchWords:
 class CounterStreams:
     """Per-agent counter-based streams for ``k`` agents whose draws land on ``device``.
 
-    ``seeds`` are the agents' seeds; ``set_seed`` gives a slot a new agent. Every draw takes
-    the agents' counters (``[k]`` integers: their own step or episode numbers) and a purpose
-    and returns a ``[k, lanes]`` torch tensor on ``device``.
+    ``seeds`` are the agents' seeds; ``set_seeds`` gives slots new agents. Every draw takes
+    the agents' counters (``[k]`` integers: their own step or episode numbers; a numpy
+    array, or an int64 tensor on ``device``) and a purpose and returns a ``[k, lanes]``
+    torch tensor on ``device``.
     """
 
     def __init__(self, seeds: list[int], device: str | torch.device = "cpu") -> None:
@@ -188,14 +190,37 @@ class CounterStreams:
 
     def set_seed(self, agent: int, seed: int) -> None:
         """Give slot ``agent`` the stream of ``seed``."""
-        self.seeds[agent] = check_seed(seed)
+        self.set_seeds([agent], [seed])
+
+    def set_seeds(self, agents: Sequence[int], seeds: Sequence[int]) -> None:
+        """Give slots ``agents`` the streams of ``seeds``, one each: the keys go to the
+        device once, however many slots change."""
+        if len(agents) != len(seeds):
+            raise ValueError(f"{len(agents)} slots but {len(seeds)} seeds")
+        checked = [check_seed(seed) for seed in seeds]
+        for agent, seed in zip(agents, checked, strict=True):
+            self.seeds[agent] = seed
         self._set_keys()
 
     def select(self, index: list[int]) -> CounterStreams:
         """The streams of the agents at ``index`` (same seeds, fewer rows)."""
         return CounterStreams([self.seeds[i] for i in index], self.device)
 
+    def _checked(self, values, name: str):
+        """Counters or bounds as given, refusing a tensor the hash cannot take as it is:
+        it must be int64 (``c * 2^8`` and the products wrap in 64 bits: narrower integers
+        give other words) and on the streams' device."""
+        if isinstance(values, torch.Tensor) and (
+            values.dtype != torch.int64 or not on_device(values, self.device)
+        ):
+            raise ValueError(
+                f"{name} must be a numpy array or an int64 tensor on the streams' device "
+                f"{self.device}, got a {values.dtype} tensor on {values.device}"
+            )
+        return values
+
     def _draw(self, purpose: int, counters, lanes: int):
+        counters = self._checked(counters, "counters")
         return self._words.words(self._keys, counters, purpose, lanes)
 
     def uniform(self, purpose: int, counters, lanes: int) -> torch.Tensor:
@@ -226,6 +251,6 @@ class CounterStreams:
         ``[k]`` below 2^31. Each index is ``(w * high) >> 32`` for 32 random bits ``w`` (two
         per word), so a value's probability is off by at most ``high / 2^32`` relative."""
         words = self._draw(purpose, counters, (lanes + 1) // 2)
-        high = self._words.column(high)
+        high = self._words.column(self._checked(high, "high"))
         halves = [(h * high) >> 32 for h in (self._words.top(words, 32), self._words.low32(words))]
         return self._words.tensor(self._words.concat(halves)[:, :lanes], self.device)

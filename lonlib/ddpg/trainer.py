@@ -35,8 +35,12 @@ dropped from the batch (:meth:`SlotTrainer.shrink`).
 Steps 1 and 3 run on the learner's device, the environments and the greedy evaluations on
 the host; per step only the actions come to the host and the environment's outputs go to
 the device (:mod:`lonlib.ddpg.devices`). The device keeps its own copy of the slots' step
-counters and busy mask (stream counters, warm-up and training masks), sent at events (a
-search's start or stop, a restore) and advanced by each step as the host's are.
+counters and busy mask (stream counters, warm-up and training masks), advanced by each step
+as the host's are and sent again, in one copy, by the first step after an event changed
+them (a search's start or stop, a drop, a shrink, a restore). An event copies only what its
+slots need: an episode end brings back the Actors and Critics of the slots whose episodes
+ended, selected on the device. That discipline holds with the lean learner, which lockstep
+batches need; the autograd reference learner copies by itself (:mod:`lonlib.ddpg.reference`).
 """
 
 from __future__ import annotations
@@ -216,7 +220,9 @@ def check_batch_size(hp: DDPGConfig, agents: int) -> None:
 
 
 def check_device(device: str) -> None:
-    """Refuse, naming ``device``, a torch device this machine cannot compute on."""
+    """Refuse, naming ``device``, a torch device this machine cannot compute on (asks
+    torch which devices exist: a check on the device outside :mod:`lonlib.ddpg.devices`,
+    made once per batch, never in a step)."""
     kind = torch.device(device)
     if kind.type == "cpu":
         return
@@ -325,13 +331,21 @@ class SlotTrainer:
         self.loss_count = np.zeros(k, dtype=np.int64)
         self.obs = np.zeros((k, self.env_config.observation_size), dtype=np.float32)
         self._obs = torch.zeros(self.obs.shape, device=self.device)  # the device's copy
-        self._counters_to_device()
+        self._counters_changed()
+
+    def _counters_changed(self) -> None:
+        """An event changed ``steps`` or ``busy``: the device's copies are stale until
+        :meth:`_counters_to_device` sends them (the next step does, so a stop followed by a
+        refill sends them once)."""
+        self._device_steps = self._device_busy = None
 
     def _counters_to_device(self) -> None:
-        """Send ``steps`` and ``busy`` to the device (after an event changed them; between
-        events each step advances the device's copies as the host's)."""
-        self._device_steps = to_device(self.steps, self.device)
-        self._device_busy = to_device(self.busy, self.device)
+        """Send ``steps`` and ``busy`` to the device in one copy if an event changed them
+        since they were last sent (between events each step advances the device's copies
+        as the host's)."""
+        if self._device_steps is None:
+            counters = to_device(np.stack([self.steps, self.busy]), self.device)
+            self._device_steps, self._device_busy = counters[0], counters[1].bool()
 
     @property
     def slots(self) -> int:
@@ -383,8 +397,8 @@ class SlotTrainer:
     def _start(self, slots, thetas, omegas, seeds, tags) -> None:
         now = time.perf_counter()
         start_scores = greedy_scores(thetas, self.env_config, self.hp.scoring)
+        self.streams.set_seeds(slots, seeds)
         for j, slot in enumerate(slots):
-            self.streams.set_seed(slot, seeds[j])
             self.replay.clear(slot)
             score = (float(start_scores[0][j]), float(start_scores[1][j]))
             counted = self.hp.count_start
@@ -410,7 +424,7 @@ class SlotTrainer:
         # The patience window opens when training starts (the first update).
         self.last_improvement[index] = self.hp.warmup_steps
         self.loss_sum[:, to_device(index, self.device)] = 0.0
-        self._counters_to_device()
+        self._counters_changed()
         mask = np.zeros(self.slots, dtype=bool)
         mask[index] = True
         self._reset_environments(mask)
@@ -421,6 +435,7 @@ class SlotTrainer:
         ``(tag, result)`` of the searches that ended in this step (their slots are free)."""
         hp = self.hp
         busy = self.busy
+        self._counters_to_device()  # if an event changed them
         # 1. act: uniform during the warm-up, then the Actor plus clipped Gaussian noise
         actions = self._actions()
         # 2. step every environment and store the transitions
@@ -505,11 +520,11 @@ class SlotTrainer:
         slots = np.flatnonzero(ended)
         trained = self.updates[slots] > 0
         candidate = trained | hp.count_start
-        flat_actor = flat_critic = None
-        if trained[candidate].any():
-            flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
-        counts = np.maximum(self.loss_count[slots], 1)
         rows = to_device(slots, self.device)
+        flat_actor = flat_critic = None
+        if trained[candidate].any():  # only the ended slots' parameters cross
+            flat_actor, flat_critic = self.learner.actor_flat(rows), self.learner.critic_flat(rows)
+        counts = np.maximum(self.loss_count[slots], 1)
         loss_means = to_host(self.loss_sum[:, rows]) / counts
         now = time.perf_counter()
         for j, slot in enumerate(slots):
@@ -529,7 +544,7 @@ class SlotTrainer:
             search.result.history.append(record)
             if candidate[j]:
                 if trained[j]:
-                    policy = (flat_actor[slot].copy(), flat_critic[slot].copy())
+                    policy = (flat_actor[j].copy(), flat_critic[j].copy())
                 else:
                     policy = (search.theta, search.omega)
                 self.pending.append((search, record, *policy))
@@ -572,13 +587,14 @@ class SlotTrainer:
         slots = np.flatnonzero(stop)
         unjudged = [i for i in slots if self.searches[i].best[0] == -np.inf]
         if unjudged:  # no training episode ended: judge the Actor at the stop
-            flat_actor, flat_critic = self.learner.actor_flat(), self.learner.critic_flat()
-            fitness, returns = greedy_scores(flat_actor[unjudged], self.env_config, self.hp.scoring)
+            rows = to_device(unjudged, self.device)
+            flat_actor, flat_critic = self.learner.actor_flat(rows), self.learner.critic_flat(rows)
+            fitness, returns = greedy_scores(flat_actor, self.env_config, self.hp.scoring)
             for j, slot in enumerate(unjudged):
                 result = self.searches[slot].result
                 result.fitness = float(fitness[j])
-                result.theta = flat_actor[slot].copy()
-                result.omega = flat_critic[slot].copy()
+                result.theta = flat_actor[j].copy()
+                result.omega = flat_critic[j].copy()
                 result.final_evaluation = True
         now = time.perf_counter()
         finished = []
@@ -592,7 +608,7 @@ class SlotTrainer:
             finished.append((search.tag, result))
             self.searches[slot] = None
         self.busy[slots] = False
-        self._counters_to_device()
+        self._counters_changed()
         return finished
 
     # ------------------------------------------------------------------ checkpoints
@@ -681,7 +697,7 @@ class SlotTrainer:
         if not np.array_equal(trainer.busy, [s is not None for s in trainer.searches]):
             raise StateLayoutError("trainer: the busy slots are not the slots with a search")
         _check_counters(trainer)
-        trainer._counters_to_device()
+        trainer._counters_changed()
         return trainer
 
     # ------------------------------------------------------------------ fewer slots
@@ -701,7 +717,7 @@ class SlotTrainer:
         for slot in slots:
             self.searches[slot] = None
             self.busy[slot] = False
-        self._counters_to_device()
+        self._counters_changed()
 
     def subset(self, slots: Sequence[int]) -> SlotTrainer:
         """A new trainer of only ``slots``, their searches continuing exactly as here (to
@@ -726,7 +742,7 @@ class SlotTrainer:
             setattr(self, name, getattr(self, name)[keep])
         rows = to_device(keep, self.device)
         self.loss_sum, self._obs = self.loss_sum[:, rows], self._obs[rows]
-        self._counters_to_device()
+        self._counters_changed()
 
 
 def make_learner(
