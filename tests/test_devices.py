@@ -9,12 +9,14 @@ import contextlib
 import dataclasses
 import itertools
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from torch.overrides import TorchFunctionMode
 
+import lonlib
 import lonlib.ddpg.devices as devices
 import lonlib.ddpg.trainer as trainer_module
 from lonlib.ddpg.devices import (
@@ -45,6 +47,8 @@ HP = DDPGConfig(
     patience_steps=10**6,
 )
 DEVICES_MODULE = "lonlib/ddpg/devices.py"
+# the package's folder: a checkout may itself lie in a folder named lonlib
+PACKAGE = Path(lonlib.__file__).parent.as_posix() + "/"
 A_SIZE, C_SIZE = actor_spec(1).n_params, critic_spec(1).n_params
 OBS = ENV.observation_size
 
@@ -177,8 +181,8 @@ class Crossings(TorchFunctionMode):
                 if frame.f_code.co_name in self.COUNTED:
                     return  # a counted copy: TransferLog's
                 via = via or frame.f_code.co_name
-            elif "/lonlib/" in path:
-                where.append(f"{path.split('/lonlib/')[-1]}:{frame.f_code.co_name}")
+            elif path.startswith(PACKAGE):  # named inside the package, wherever it lies
+                where.append(f"{path[len(PACKAGE) :]}:{frame.f_code.co_name}")
             frame = frame.f_back
         if via is not None and is_host("cpu"):
             return  # host_view or host_tensor of host memory: the CPU's no-copy branch
