@@ -318,21 +318,34 @@ def _check_starts(folder: Path, config, trials: pd.DataFrame, report, mismatch, 
     data), is skipped."""
     if "start_fitness" not in trials.columns:
         return
-    size = actor_spec(config.env.n_carts).n_params
+    n_carts = config.env.n_carts
+    size = actor_spec(n_carts).n_params
+    parents: dict[tuple[float, int, int], tuple[np.ndarray, np.ndarray] | None] = {}
+
+    def parent_parameters(p: float, run: int, parent: int):
+        """The stored parent's Actor and Critic, read once for all its children (None if
+        missing or damaged: the actor check names it)."""
+        key = (p, run, parent)
+        if key not in parents:
+            try:
+                stored = read_optimum(optimum_path(folder, p, run, parent))
+                parents[key] = (np.asarray(stored.theta), np.asarray(stored.omega))
+            except (OSError, CorruptDataError):
+                parents[key] = None
+        return parents[key]
+
     starts, rows = [], []
     for row in trials.to_dict("records"):
         if not _number(row["start_fitness"]):
             continue
         p, run, parent = float(row["p"]), int(row["run"]), int(row["parent"])
-        incumbent = None
-        if parent >= 0:
-            try:
-                stored = read_optimum(optimum_path(folder, p, run, parent))
-            except (OSError, CorruptDataError):
-                continue  # the actor check names a missing or damaged file
-            incumbent = (np.asarray(stored.theta), np.asarray(stored.omega))
         run_seed = config.run_seed(p, run)
-        initial = random_parameters(run_seed, config.env.n_carts)
+        if parent >= 0:
+            incumbent, initial = parent_parameters(p, run, parent), None
+            if incumbent is None:
+                continue
+        else:
+            incumbent, initial = None, random_parameters(run_seed, n_carts)
         theta = search_start(run_seed, int(row["index"]), p, incumbent, initial)[0]
         if theta.shape != (size,) or not np.isfinite(theta).all():
             continue  # the parent is unusable: the actor check names it

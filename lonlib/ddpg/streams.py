@@ -186,7 +186,9 @@ class CounterStreams:
 
     def _set_keys(self) -> None:
         self._keys = self._words.keys(self.seeds)
-        self._host_keys = _HOST_WORDS.keys(self.seeds)
+        self._host_keys = (  # the host's own keys serve host_uniform (once, on the host)
+            self._keys if self._words is _HOST_WORDS else _HOST_WORDS.keys(self.seeds)
+        )
 
     def set_seed(self, agent: int, seed: int) -> None:
         """Give slot ``agent`` the stream of ``seed``."""

@@ -177,14 +177,16 @@ def search_start(
     index: int,
     perturbation: float,
     incumbent: tuple[np.ndarray, np.ndarray] | None,
-    initial: tuple[np.ndarray, np.ndarray],
+    initial: tuple[np.ndarray, np.ndarray] | None,
     take_step: TakeStep = perturb_parameters,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The Actor and Critic that trial ``index`` of a run starts from: ``initial`` while the
-    run has no ``incumbent``, else ``take_step`` of the incumbent's parameters with the
-    trial's perturbation stream (:func:`trial_seeds`). What a run asks for and what
-    ``lonlib verify`` replays."""
+    run has no ``incumbent`` (unused, and may be None, once it has), else ``take_step`` of
+    the incumbent's parameters with the trial's perturbation stream (:func:`trial_seeds`).
+    What a run asks for and what ``lonlib verify`` replays."""
     if incumbent is None:
+        if initial is None:
+            raise ValueError("the first search of a run needs the run's initial parameters")
         return initial
     rng = np.random.default_rng(trial_seeds(run_seed, index).perturbation)
     return take_step(incumbent[0], incumbent[1], perturbation, rng)
