@@ -11,8 +11,7 @@ from lonlib.analysis import claims_power
 from lonlib.analysis.claims_power import (
     AGENT_STEPS_PER_CORE_SECOND,
     ENV_STEPS_PER_RUN,
-    FLOP_PER_AGENT_STEP,
-    GPU_FLOPS,
+    GPU_LOCKSTEP_RATES,
     cost,
     power_binomial,
     power_low_basins,
@@ -75,6 +74,13 @@ def test_cost_follows_the_documented_rates():
     one_run = ENV_STEPS_PER_RUN / AGENT_STEPS_PER_CORE_SECOND / 3600
     assert row["dask_64_hours"] == pytest.approx(one_run)  # 20 runs: one run's time
     assert cost(1000)["dask_64_hours"] == pytest.approx(2000 * one_run / 64)
-    gpu = 20 * ENV_STEPS_PER_RUN * FLOP_PER_AGENT_STEP / GPU_FLOPS / 3600
-    assert row["gpu_hours_estimate"] == pytest.approx(gpu)
+    # 20 runs: one batch of K = 20, each slot at rate(20) / 20 (between K = 16 and 64)
+    per_slot = row["gpu_hours"] * 3600 / ENV_STEPS_PER_RUN
+    assert GPU_LOCKSTEP_RATES[64] / 64 < 1 / per_slot < GPU_LOCKSTEP_RATES[16] / 16
+    assert cost(8)["gpu_hours"] == pytest.approx(
+        ENV_STEPS_PER_RUN / (GPU_LOCKSTEP_RATES[16] / 16) / 3600
+    )
+    # 512 runs: two batches of 256 one after the other
+    big = 2 * ENV_STEPS_PER_RUN / (GPU_LOCKSTEP_RATES[256] / 256) / 3600
+    assert cost(256)["gpu_hours"] == pytest.approx(big)
     assert one_run == pytest.approx(1.47, abs=0.01)  # 0.77M env steps at 145 per second

@@ -45,10 +45,10 @@ Cost of ``2 x runs per p`` runs at :data:`ENV_STEPS_PER_RUN` env steps each (one
 update per env step): this machine, measured (:data:`AGENT_STEPS_PER_CORE_SECOND` per core
 on :data:`THIS_MACHINE_CORES` cores); a Dask cluster of :data:`CLUSTER_CORES` cores, an
 extrapolation of the same per-core rate (never measured; a run is a sequential chain on
-one core, so it takes at least one run's time); one GPU, an estimate from the FLOP count
-(:data:`FLOP_PER_AGENT_STEP`, issue 30) at an assumed achieved :data:`GPU_FLOPS`: a lower
-bound (no GPU measured; launches, host round trips, the environment's stepping and the
-greedy evaluations are not counted).
+one core, so it takes at least one run's time); one GPU, from the lockstep rates measured on
+an NVIDIA H200 (:data:`GPU_LOCKSTEP_RATES`, batch 2000, greedy rollouts included; issue 30):
+the runs train as one batch of K = min(runs, :data:`GPU_MAX_SLOTS`) slots at the rate
+interpolated in log K, and each run is a sequential chain in its slot.
 """
 
 from __future__ import annotations
@@ -84,12 +84,12 @@ steps in 8 h 50 min on 2 cores (analyses and tests shared the cores)."""
 THIS_MACHINE_CORES = 2
 CLUSTER_CORES = 64
 """The Dask cluster of the cost column: the same per-core rate on this many cores."""
-FLOP_PER_AGENT_STEP = 47e6
-"""One DDPG update of the paper's networks at batch 2000, per agent (issue 30's estimate,
-not a measurement); one update per env step."""
-GPU_FLOPS = 20e12
-"""Assumed achieved FLOP/s of one GPU on the lockstep batch (an assumption: no GPU has
-been measured)."""
+GPU_LOCKSTEP_RATES = {1: 269.0, 16: 3179.0, 64: 7362.0, 256: 11684.0}
+"""Lockstep agent-steps per second by K on one NVIDIA H200 at batch 2000 (the paper's
+networks, two carts, greedy rollouts on the host included), measured 2026-11-27 by
+``python -m benchmarks.cuda_check`` (``benchmarks/measured/cuda-h200-2026-11-27.json``)."""
+GPU_MAX_SLOTS = 256
+"""The largest K measured on the GPU: more runs than this train in batches of this size."""
 P_VALUES = 2
 """The experiment runs both p values (claim c compares them), so its cost is twice the
 runs per p."""
@@ -193,8 +193,28 @@ def cost(runs_per_p: float) -> dict[str, float]:
         "core_hours": core_hours,
         "this_machine_hours": core_hours / THIS_MACHINE_CORES,
         "dask_64_hours": max(core_hours / CLUSTER_CORES, run_hours) if runs > 0 else core_hours,
-        "gpu_hours_estimate": steps * FLOP_PER_AGENT_STEP / GPU_FLOPS / 3600,
+        "gpu_hours": gpu_hours(runs),
     }
+
+
+def gpu_lockstep_rate(slots: float) -> float:
+    """Agent-steps per second of a lockstep batch of ``slots`` searches on the measured GPU
+    (:data:`GPU_LOCKSTEP_RATES`, interpolated linearly in log K; at most
+    :data:`GPU_MAX_SLOTS`)."""
+    ks = np.array(sorted(GPU_LOCKSTEP_RATES), dtype=float)
+    rates = np.array([GPU_LOCKSTEP_RATES[int(k)] for k in ks])
+    return float(np.interp(np.log(min(max(slots, 1.0), GPU_MAX_SLOTS)), np.log(ks), rates))
+
+
+def gpu_hours(runs: float) -> float:
+    """Wall hours of ``runs`` runs of :data:`ENV_STEPS_PER_RUN` env steps on one GPU: one
+    lockstep batch of K = min(runs, :data:`GPU_MAX_SLOTS`) slots, each slot a run at
+    ``rate(K) / K`` agent-steps per second, ``ceil(runs / K)`` batches one after another."""
+    if runs <= 0:
+        return 0.0
+    slots = min(runs, GPU_MAX_SLOTS)
+    per_slot = gpu_lockstep_rate(slots) / slots
+    return math.ceil(runs / slots) * ENV_STEPS_PER_RUN / per_slot / 3600
 
 
 @lru_cache(maxsize=1)
@@ -279,7 +299,7 @@ def power_table() -> pd.DataFrame:
     (``units_needed``, ``power`` there; -1 and NaN runs when not reached within
     :data:`MAX_UNITS`), units per run, ``runs_per_p``, and the cost of
     running both p values at that scale (``runs_total``, ``env_steps_M``, ``core_hours``,
-    ``this_machine_hours``, ``dask_64_hours``, ``gpu_hours_estimate``; see the module
+    ``this_machine_hours``, ``dask_64_hours``, ``gpu_hours``; see the module
     docstring for what is measured, extrapolated and estimated)."""
     rows = []
     for row in _rows():
