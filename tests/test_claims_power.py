@@ -83,4 +83,24 @@ def test_cost_follows_the_documented_rates():
     # 512 runs: two batches of 256 one after the other
     big = 2 * ENV_STEPS_PER_RUN / (GPU_LOCKSTEP_RATES[256] / 256) / 3600
     assert cost(256)["gpu_hours"] == pytest.approx(big)
+    # 32 runs: K = 32, the rate halfway between K = 16 and 64 in log K
+    halfway = (GPU_LOCKSTEP_RATES[16] + GPU_LOCKSTEP_RATES[64]) / 2
+    assert cost(16)["gpu_hours"] == pytest.approx(ENV_STEPS_PER_RUN / (halfway / 32) / 3600)
+    # 300 runs: K = 256, ceil(300 / 256) = 2 batches (not 300 / 256 of one, not one of 300)
+    assert cost(150)["gpu_hours"] == pytest.approx(big)
+    # half a run takes a slot as a whole run does; a claim never reached costs NaN
+    assert cost(0.25)["gpu_hours"] == pytest.approx(cost(0.5)["gpu_hours"])
+    assert math.isnan(cost(float("nan"))["gpu_hours"])
     assert one_run == pytest.approx(1.47, abs=0.01)  # 0.77M env steps at 145 per second
+
+
+def test_gpu_rates_are_the_committed_measurement():
+    import json
+    from pathlib import Path
+
+    measured = Path(__file__).parents[1] / "benchmarks/measured/cuda-h200-2026-11-27.json"
+    rows = json.loads(measured.read_text())["rates"]
+    at_2000 = {r["K"]: r["agent-steps/s"] for r in rows if r["batch"] == 2000}
+    assert set(at_2000) == set(GPU_LOCKSTEP_RATES)
+    for k, rate in GPU_LOCKSTEP_RATES.items():
+        assert rate == pytest.approx(at_2000[k], abs=0.5)

@@ -210,8 +210,11 @@ def gpu_hours(runs: float) -> float:
     """Wall hours of ``runs`` runs of :data:`ENV_STEPS_PER_RUN` env steps on one GPU: one
     lockstep batch of K = min(runs, :data:`GPU_MAX_SLOTS`) slots, each slot a run at
     ``rate(K) / K`` agent-steps per second, ``ceil(runs / K)`` batches one after another."""
+    if math.isnan(runs):  # a claim not reached within MAX_UNITS (power_table's NaN runs)
+        return float("nan")
     if runs <= 0:
         return 0.0
+    runs = math.ceil(runs - 1e-9)  # whole runs: a fraction of a run still takes a slot
     slots = min(runs, GPU_MAX_SLOTS)
     per_slot = gpu_lockstep_rate(slots) / slots
     return math.ceil(runs / slots) * ENV_STEPS_PER_RUN / per_slot / 3600

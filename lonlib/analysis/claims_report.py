@@ -81,7 +81,7 @@ def power_markdown(power: pd.DataFrame) -> str:
                 f"{v:.0f}" for v in power["this_machine_hours"]
             ],
             "64-core Dask (h, extrapolated)": [f"{v:.1f}" for v in power["dask_64_hours"]],
-            "one GPU (h, measured H200 rate)": [f"{v:.1f}" for v in power["gpu_hours"]],
+            "one GPU (h, H200 early-training rate)": [f"{v:.1f}" for v in power["gpu_hours"]],
         }
     )
     return markdown_table(table)
