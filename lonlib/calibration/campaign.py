@@ -24,6 +24,14 @@ from lonlib.util.validation import check_range
 GITIGNORE = "*.npz\ninflight/\n.*.tmp\n"
 
 
+def gitignore_text(config: CalibrationConfig) -> str:
+    """The study folder's ``.gitignore``: :data:`GITIGNORE`, except the Actors and Critics of
+    the cells a ``continue_from`` cell starts from (a few tens of KB each): committed, they
+    let that cell run in a later session, on another machine, than the cell it continues."""
+    sources = dict.fromkeys(c.continue_from for c in config.cells if c.continue_from)
+    return GITIGNORE + "".join(f"!{name}.npz\n" for name in sources)
+
+
 def run_calibration(
     config: CalibrationConfig,
     out: str | Path,
@@ -51,7 +59,7 @@ def run_calibration(
         if cell.continue_from and config.cell(cell.continue_from) not in todo:
             cell_starts(cell, config, out)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / ".gitignore", GITIGNORE.encode())
+    atomic_write(out / ".gitignore", gitignore_text(config).encode())
     write_json(
         out / "calibration.json",
         {"config": config.to_dict(), "updated": datetime.now(UTC).isoformat(timespec="seconds")},
