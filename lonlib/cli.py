@@ -79,7 +79,7 @@ def _check_output_folder(out: Path) -> str:
 
 
 def _run(args: argparse.Namespace) -> None:
-    from lonlib.experiment.running import load_config, run_experiment
+    from lonlib.experiment.running import load_config, pending_runs, run_experiment
 
     config = load_config(args.config)
     changes: dict = {}
@@ -106,8 +106,17 @@ def _run(args: argparse.Namespace) -> None:
         executor=args.executor,
         slots=args.slots,
         checkpoint_seconds=args.checkpoint_minutes * 60 if args.checkpoint_minutes else None,
+        drain_after_seconds=None if args.drain_after is None else args.drain_after * 60,
     )
     print(f"{len(trials)} local searches stored under {out}")
+    if args.drain_after is not None:
+        left = len(pending_runs(config, out))
+        total = len(config.perturbations) * config.runs
+        print(
+            f"{left} of {total} runs unfinished: run the same command again to continue them"
+            if left
+            else f"all {total} runs finished"
+        )
 
 
 def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
@@ -116,7 +125,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     experiment's configuration), nothing computed, created or written."""
     from lonlib.ddpg import check_device
     from lonlib.experiment.executors import resolve_executor, session_executor
-    from lonlib.experiment.lockstep import check_lockstep
+    from lonlib.experiment.lockstep import check_drain, check_lockstep
     from lonlib.storage.manifest import manifest_path, updated_manifest
 
     kind = resolve_executor(
@@ -129,6 +138,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     check_device(config.ddpg.device)
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
+    check_drain(kind, None if args.drain_after is None else args.drain_after * 60)
     state = _check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
         updated_manifest(dataclasses.replace(config, executor=kind, slots=slots), out)
@@ -142,6 +152,8 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
         where += f" on {args.scheduler}"
     if kind == "lockstep":
         where += f", {slots} slots on {config.ddpg.device}"
+    if args.drain_after is not None:
+        where += f", draining after {args.drain_after:g} minutes"
     print(
         f"dry run: {config.name}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
         f"{config.runs} runs per p; executor {where}; output {out} ({state}). "
@@ -350,6 +362,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="lockstep: write the batch in flight this often, to resume mid-search after a "
         "kill (at least 1; 0: never write nor resume one; default 10)",
     )
+    run.add_argument(
+        "--drain-after",
+        type=float,
+        metavar="MINUTES",
+        help="lockstep: after this many minutes start no new local search, finish and store "
+        "those in flight, and exit; the same command again continues (for a machine whose "
+        "time runs out; 0: one search per slot)",
+    )
     run.add_argument("--out", help="output folder (default data/<name>)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
@@ -446,6 +466,7 @@ ARGUMENT_RANGES = (
     ("bins", 1, None),
     ("workers", 1, 4096),
     ("limit", 0, None),
+    ("drain_after", 0.0, 1e7),  # minutes
 )
 
 

@@ -60,7 +60,7 @@ GUARDS = {
         "tests/test_lockstep.py",
     ],
     DEVICES: ["tests/test_devices.py", "tests/test_random_streams.py", "tests/test_lockstep.py"],
-    LOCKSTEP: ["tests/test_lockstep.py"],
+    LOCKSTEP: ["tests/test_lockstep.py", "tests/test_drain.py"],
     CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
     CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
     LEAN: [
@@ -228,6 +228,19 @@ MUTANTS = [
         "np.array_equal(search.theta, run.request.theta)",
         "True or np.array_equal(search.theta, run.request.theta)",
         "a slot holding another start than its run asks for is resumed",
+    ),
+    # --- draining (--drain-after): what a drained call stores
+    Mutant(
+        LOCKSTEP,
+        "if run.driver.finished or drained:",
+        "if run.driver.finished:",
+        "a draining batch refills its slots (drain ignored)",
+    ),
+    Mutant(
+        LOCKSTEP,
+        "run = None if drained else self.open_next()",
+        "run = self.open_next()",
+        "a draining batch starts the next pending run",
     ),
     Mutant(
         CHECKPOINTS,

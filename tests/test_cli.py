@@ -228,6 +228,7 @@ def test_an_output_under_a_file_or_a_folder_as_page_is_said_to_be_one(tmp_path, 
         (["verify", "DIR", "--limit", "-1"], "--limit"),
         (["calibrate", "OUT", "--workers", "0"], "--workers"),
         (["run", "quick", "--out", "OUT", "--workers", "0"], "--workers"),
+        (["run", "quick", "--out", "OUT", "--drain-after", "-1"], "--drain-after"),
     ],
 )
 @pytest.mark.parametrize("dry_run", [True, False])

@@ -15,6 +15,11 @@ is the other executors' (:func:`lonlib.storage.store.save_step` after every sear
 held while it is in the batch), and every few minutes the whole batch is also written to an
 in-flight checkpoint (:mod:`lonlib.experiment.checkpoints`): a killed lockstep experiment resumes
 its searches in flight from there, losing at most the minutes since.
+
+A batch given a drain time (``drain_at``, for a machine whose time runs out) starts no search
+from then on: a slot whose search ends is stored and left empty (its run's lock released,
+finished or not, so that a later call continues it from its stored trials), the batch shrinks,
+and it ends once no search is in flight. Runs it has not started stay unstarted.
 """
 
 from __future__ import annotations
@@ -56,6 +61,27 @@ log = logging.getLogger(__name__)
 CHECKPOINT_SECONDS = 600.0  # how often a batch writes its in-flight checkpoint
 
 
+def draining(drain_at: float | None) -> bool:
+    """Whether the drain time ``drain_at`` (a :func:`time.monotonic` value; ``None``: never)
+    has come: from then on a lockstep batch starts no local search."""
+    return drain_at is not None and time.monotonic() >= drain_at
+
+
+def check_drain(executor: str, drain_after_seconds: float | None) -> None:
+    """Refuse, by name, a drain time out of range or for an executor that cannot drain: only
+    the lockstep executor starts each local search itself (the others hand whole runs to
+    their workers, which cannot be told to stop between two searches)."""
+    if drain_after_seconds is None:
+        return
+    check_range("drain_after_seconds", drain_after_seconds, 0.0, 1e9)
+    if executor != "lockstep":
+        raise ValueError(
+            f"a drain time (--drain-after) needs the lockstep executor; executor {executor!r} "
+            "runs whole runs in its workers and cannot stop between their local searches "
+            "(use --executor lockstep, or leave --drain-after out)"
+        )
+
+
 class _Yielded(Exception):
     """A batch stopped, its checkpoint written, because it was asked to yield."""
 
@@ -86,7 +112,7 @@ class LockstepBatch:
     local searches train as one :class:`~lonlib.ddpg.trainer.SlotTrainer`, each slot refilled
     with its run's next search as one ends, resumed from and saved to in-flight checkpoints.
     The arguments are :func:`run_lockstep`'s; :meth:`run` trains until the runs end (or the
-    batch yields)."""
+    batch yields, or drains)."""
 
     def __init__(
         self,
@@ -100,8 +126,11 @@ class LockstepBatch:
         tick_seconds: float = 5.0,
         checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
         should_yield: Callable[[], bool] | None = None,
+        drain_at: float | None = None,
+        start_first: bool = True,
     ) -> None:
         self.config, self.slots, self.wait, self.on_done = config, slots, wait, on_done
+        self.drain_at, self.start_first = drain_at, start_first
         self.on_tick, self.tick_seconds = on_tick, tick_seconds
         self.checkpoint_seconds, self.should_yield = checkpoint_seconds, should_yield
         check_lockstep(config.ddpg, slots)
@@ -198,6 +227,18 @@ class LockstepBatch:
             [(r.p, r.run) for r in runs],
         )
 
+    def may_fill(self) -> bool:
+        """Whether the batch may start searches in its free slots now: before the drain
+        time, or for its first fill when ``start_first`` (every call makes progress)."""
+        return self.start_first or not draining(self.drain_at)
+
+    def release(self, tag: Job) -> None:
+        """Take the run ``tag`` out of the batch, its lock released (reported if it ended)."""
+        run = self.active.pop(tag)
+        run.lock.close()
+        if run.driver.finished:
+            self.on_done(run_summary(run.p, run.run, run.driver.state))
+
     def batch(self, block_first: bool) -> None:
         """Train until the pending runs are done (those held by others are deferred)."""
         with self.owner:
@@ -226,13 +267,21 @@ class LockstepBatch:
             trainer, checkpoint = restored
             checkpoint_written = time.monotonic()
             more = []
-            while len(more) < len(trainer.free_slots()) and (run := self.open_next()) is not None:
+            while (
+                self.may_fill()
+                and len(more) < len(trainer.free_slots())
+                and (run := self.open_next()) is not None
+            ):
                 more.append(self.ask(run))
             if more:
                 self.refill(trainer, more)
         else:
             first = []
-            while len(first) < self.slots and (run := self.open_next(block_first and not first)):
+            while (
+                self.may_fill()
+                and len(first) < self.slots
+                and (run := self.open_next(block_first and not first))
+            ):
                 first.append(self.ask(run))
             if not first:
                 return
@@ -245,29 +294,36 @@ class LockstepBatch:
                 tags=[(r.p, r.run) for r in first],
             )
             checkpoint, checkpoint_written = None, time.monotonic()
+        self.start_first = False  # the first fill is over: the drain time holds from here
         last_tick, steps_at_tick = time.monotonic(), 0
         steps = 0
         yielding = self.should_yield is not None and self.checkpoint_seconds is not None
+        drained = False
         while trainer.busy.any():
             steps += int(trainer.busy.sum())
             refills: list[_Run] = []
             ended = trainer.step()
+            if not drained and draining(self.drain_at):
+                drained = True
+                log.info(
+                    "%s: draining: no new local searches; the %d in flight are finished and stored",
+                    self.out,
+                    int(trainer.busy.sum()) + len(ended),
+                )
             for tag, result in ended:
                 run = self.active[tag]
                 optimum = local_optimum(result, self.config.env, self.config.ddpg)
                 run.driver.record(run.request, optimum, result.seconds)
                 save_step(self.out, run.p, run.run, run.driver.state.trials, optimum)
-                if run.driver.finished:
-                    del self.active[tag]
-                    run.lock.close()
-                    self.on_done(run_summary(run.p, run.run, run.driver.state))
-                    run = self.open_next()
+                if run.driver.finished or drained:
+                    self.release(tag)  # draining: a later call continues the run
+                    run = None if drained else self.open_next()
                     if run is None:
                         continue
                 refills.append(self.ask(run))
             if refills:
                 self.refill(trainer, refills)
-            elif not self.pending and not trainer.busy.all():
+            elif (drained or not self.pending) and not trainer.busy.all():
                 trainer.shrink()
             now = time.monotonic()
             due = (
@@ -281,13 +337,12 @@ class LockstepBatch:
                 continue
             if self.on_tick is not None:
                 rate = (steps - steps_at_tick) / (now - last_tick)
-                self.on_tick(
-                    {
-                        "in_flight": int(trainer.busy.sum()),
-                        "pending": len(self.pending),
-                        "env_steps/s": f"{rate:,.0f}",
-                    }
-                )
+                info = {
+                    "in_flight": int(trainer.busy.sum()),
+                    "pending": len(self.pending),
+                    "env_steps/s": f"{rate:,.0f}",
+                }
+                self.on_tick(info | ({"draining": True} if drained else {}))
             last_tick, steps_at_tick = now, steps
             if yielding and trainer.busy.any() and self.should_yield():
                 checkpoint, written = self.write_checkpoint(trainer, checkpoint)
@@ -305,12 +360,12 @@ class LockstepBatch:
             remove_inflight(checkpoint)  # every run of the batch has ended
 
     def run(self) -> bool:
-        """Train until every run has ended: True if the batch yielded first (its checkpoint
-        written), False once its runs have ended."""
+        """Train until every run has ended (or, past the drain time, until no search is in
+        flight): True if the batch yielded first (its checkpoint written), False otherwise."""
         try:
             self.batch(block_first=False)
             # runs another process held: now wait for them, one batch at a time
-            while self.deferred:
+            while self.deferred and self.may_fill():
                 self.pending.extend(self.deferred)
                 self.deferred.clear()
                 self.batch(block_first=True)
@@ -333,6 +388,8 @@ def run_lockstep(
     tick_seconds: float = 5.0,
     checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
     should_yield: Callable[[], bool] | None = None,
+    drain_at: float | None = None,
+    start_first: bool = True,
 ) -> bool:
     """Run (or resume) the runs ``jobs`` of experiment ``config`` in ``out`` through one
     lockstep batch of at most ``slots`` local searches. True when the batch yielded (below)
@@ -352,6 +409,14 @@ def run_lockstep(
     that;
     a batch whose runs a checkpoint holds restarts from it instead of from the stored trials
     (it keeps the checkpoint's number of slots).
+
+    From the drain time ``drain_at`` on (a :func:`time.monotonic` value; ``None``: never) the
+    batch starts no search: each search in flight is finished and stored, its slot left
+    empty and its run's lock released (``on_done`` only for a run that ended), and the batch
+    returns (False) once none is left in flight; the runs it has not started stay pending, and
+    those held by another process are not waited for. Its first fill (or a checkpoint's free
+    slots) starts searches even past the drain time when ``start_first``, so that every call
+    makes progress.
     """
     return LockstepBatch(
         out,
@@ -364,6 +429,8 @@ def run_lockstep(
         tick_seconds,
         checkpoint_seconds,
         should_yield,
+        drain_at,
+        start_first,
     ).run()
 
 

@@ -10,7 +10,8 @@ process resumes searches, and the runs not started go to the process with the fe
 checkpoint carries each search exactly, so a run's trials are the same as in one batch
 (tested); the rounds only change how soon the experiment ends. A process that cannot write
 its checkpoint keeps its searches (and the round waits for it); runs held by another process
-and waited for (``wait``) are never dealt out again.
+and waited for (``wait``) are never dealt out again. From a drain time on, every process drains
+its batch (:func:`~lonlib.experiment.lockstep.run_lockstep`) and no work is dealt out again.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from lonlib.experiment.checkpoints import (
     remove_inflight,
     split_inflight,
 )
-from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, Job, run_lockstep
+from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, Job, draining, run_lockstep
 from lonlib.experiment.runs import experiment_plan, hold_runs
 from lonlib.storage.store import DataWriteError
 from lonlib.util.messages import show_lonlib_messages
@@ -56,6 +57,7 @@ def run_lockstep_processes(
     on_tick: Callable[[dict[str, Any]], None] | None = None,
     tick_seconds: float = 5.0,
     checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
+    drain_at: float | None = None,
 ) -> None:
     """:func:`~lonlib.experiment.lockstep.run_lockstep` in ``workers`` spawned processes, each a
     batch of up to ``slots`` searches over its share of the jobs. A process first gets the runs of
@@ -63,7 +65,12 @@ def run_lockstep_processes(
     turn. With checkpoints (``checkpoint_seconds`` not None), the processes are stopped and the work
     left dealt out again whenever a process runs out of runs while the others could use its core
     (module docstring). ``on_done`` gets each run's summary once; ``on_tick`` the number of
-    processes busy. A run's trials are the same as in one batch."""
+    processes busy (and ``draining``). A run's trials are the same as in one batch.
+
+    From ``drain_at`` on (a :func:`time.monotonic` value, the same clock in every process of
+    this machine; ``None``: never) each process drains its batch, and no round starts a
+    search: a round that begins past it only finishes the searches of the checkpoints it
+    resumes. Only the first round fills its batches past it (every call makes progress)."""
     check_range("workers", workers, 1, 4096)
     checkpoints = checkpoint_seconds is not None
     remaining = list(jobs)
@@ -73,6 +80,7 @@ def run_lockstep_processes(
         reported.add((summary["p"], summary["run"]))
         on_done(summary)
 
+    start_first = True  # the first round fills its batches even past the drain time
     while remaining:
         if checkpoints:
             spread_checkpoints(out, config, remaining, workers)
@@ -88,6 +96,8 @@ def run_lockstep_processes(
                 on_tick,
                 tick_seconds,
                 checkpoint_seconds,
+                drain_at=drain_at,
+                start_first=start_first,
             )
             return
         dealt_again = _round(
@@ -100,9 +110,12 @@ def run_lockstep_processes(
             on_tick=on_tick,
             tick_seconds=tick_seconds,
             checkpoint_seconds=checkpoint_seconds,
+            drain_at=drain_at,
+            start_first=start_first,
         )
         if not dealt_again:
             return
+        start_first = False
         remaining = [job for job in remaining if job not in reported]
 
 
@@ -116,9 +129,12 @@ def _round(
     on_tick: Callable[[dict[str, Any]], None] | None,
     tick_seconds: float,
     checkpoint_seconds: float | None,
+    drain_at: float | None = None,
+    start_first: bool = True,
 ) -> bool:
     """One process per group until every process has ended; True when they were asked to
-    yield (their work is then left in checkpoints and pending runs for the next round).
+    yield (their work is then left in checkpoints and pending runs for the next round;
+    never past the drain time ``drain_at``, when each process drains its batch instead).
     Never with ``wait``: a process waiting for a run another process holds cannot yield
     while it waits. If this process fails (or is interrupted), the workers are asked to
     yield too, so that they write their checkpoints and stop within a tick."""
@@ -141,6 +157,8 @@ def _round(
                 checkpoint_seconds,
                 tick_seconds,
                 index,
+                drain_at,
+                start_first,
             ): index
             for index, group in enumerate(groups)
         }
@@ -153,7 +171,8 @@ def _round(
                         on_done(summary)
                 left = sum(loads[futures[future]] for future in busy)
                 idle = len(busy) < len(futures)
-                if rebalance and idle and not signal.is_set() and left > len(busy):
+                drained = draining(drain_at)  # the processes drain: nothing to deal out
+                if rebalance and idle and not signal.is_set() and left > len(busy) and not drained:
                     log.info(
                         "%s: a process ran out of runs; %d searches in flight or runs not "
                         "started are dealt out again",
@@ -162,7 +181,7 @@ def _round(
                     )
                     signal.set()
                 if on_tick is not None:
-                    on_tick({"processes": len(busy)})
+                    on_tick({"processes": len(busy)} | ({"draining": True} if drained else {}))
         except BaseException:
             signal.set()
             pool.shutdown(wait=True, cancel_futures=True)
@@ -237,6 +256,8 @@ def _lockstep_group(
     checkpoint_seconds: float | None,
     tick_seconds: float,
     index: int,
+    drain_at: float | None = None,
+    start_first: bool = True,
 ) -> list[dict[str, Any]]:
     """One worker process's lockstep batch: the summaries of its runs that ended (whether
     it yielded is the round's signal). It stops (losing only its searches in flight since its last
@@ -261,5 +282,7 @@ def _lockstep_group(
         tick_seconds,
         checkpoint_seconds,
         should_yield=_yield_signal.is_set,
+        drain_at=drain_at,
+        start_first=start_first,
     )
     return summaries

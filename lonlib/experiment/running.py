@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import errno
 import logging
+import time
 import warnings
 from functools import partial
 from pathlib import Path
@@ -32,7 +33,7 @@ from lonlib.experiment.checkpoints import (
     scan_inflight,
 )
 from lonlib.experiment.executors import execute_runs, resolve_executor, session_executor
-from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_lockstep
+from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_drain, check_lockstep, draining
 from lonlib.experiment.lockstep_workers import run_lockstep_processes
 from lonlib.experiment.runs import (  # noqa: F401  (re-exported: they lived here)
     MANIFEST_LOCK,
@@ -168,6 +169,7 @@ def run_experiment(
     executor: str | None = None,
     slots: int | None = None,
     checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
+    drain_after_seconds: float | None = None,
 ) -> pd.DataFrame:
     """Run every unfinished run of ``config`` into ``out``; return all trials.
 
@@ -184,12 +186,19 @@ def run_experiment(
     else serial. Every executor gives a run the same trials. A run whose worker dies is retried (up
     to ``max_attempts``) and resumes from its last stored local search.
 
+    ``drain_after_seconds`` (lockstep only; ``None``: never) after the start of the call, the
+    batches start no local search: the searches in flight are finished and stored, their runs
+    left unfinished (and unlocked) when they would need more, and the call returns once none is
+    in flight; calling it again continues them. The first batch is filled even at 0, so every
+    call makes progress.
+
     Before any compute: ``out`` must exist or be creatable in an existing folder and accept
     files (:class:`lonlib.storage.store.DataWriteError` otherwise; on Dask, every worker checks it
     too), and its stored runs must be readable. A run that another process is writing is
     left to it and waited for once everything else is done; if its holder dies, this
     process continues the run from what the holder stored.
     """
+    started = time.monotonic()  # the drain time counts from here
     check_range("workers", workers, 1, 4096)
     check_range("max_attempts", max_attempts, 1, 1000)
     requested = session_executor(executor, config.executor, scheduler)
@@ -202,6 +211,8 @@ def run_experiment(
     check_device(config.ddpg.device)
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
+    check_drain(kind, drain_after_seconds)
+    drain_at = None if drain_after_seconds is None else started + drain_after_seconds
     out = Path(out)
     check_output_folder(out)
     capability = torch_cpu_capability()
@@ -244,6 +255,7 @@ def run_experiment(
                 wait,
                 lambda info: _refresh(bar, out, batch=info),
                 checkpoint_seconds=checkpoint_seconds,
+                drain_at=drain_at,
             )
             return
         execute_runs(
@@ -261,7 +273,11 @@ def run_experiment(
     try:
         if todo:
             execute(todo, wait=False)
-        if held:
+        if held and draining(drain_at):  # waiting for them would start searches
+            log.warning(
+                "%s: drained; %d runs another process is writing left to it", out, len(held)
+            )
+        elif held:
             names = "; ".join(f"p={p} run {run}: {who}" for (p, run), who in held.items())
             log.warning("%s: waiting for runs another process is writing (%s)", out, names)
             jobs = list(held)
@@ -296,14 +312,20 @@ def check_worker_sees_folder(out: str) -> None:
     check_output_folder(Path(out))
 
 
+DRAINING = " (draining)"  # what the progress bar's description says once a batch drains
+
+
 def _refresh(bar: tqdm, out: Path, done: int = 0, batch: dict | None = None) -> None:
     """Advance the progress bar and show local searches and the best fitness so far (and,
-    from the lockstep executor, its batch: searches in flight, env steps per second)."""
+    from the lockstep executor, its batch: searches in flight, env steps per second, and
+    "(draining)" after the description once it drains)."""
     if bar.disable:
         return
     bar.update(done)
     trials = read_experiment_trials(out)
     postfix = dict(batch or {})
+    if postfix.pop("draining", False) and not bar.desc.removesuffix(": ").endswith(DRAINING):
+        bar.set_description_str(bar.desc.removesuffix(": ") + DRAINING, refresh=False)
     if len(trials):
         postfix.update(local_searches=len(trials), best=f"{trials['fitness'].max():.3f}")
     if postfix:
