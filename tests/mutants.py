@@ -49,9 +49,15 @@ ROLLOUT, NETS, PMATH = (
 BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/storage/configs.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
+STUDY = "lonlib/calibration/study.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
-    DDPG: ["tests/test_ddpg.py", "tests/test_devices.py", "tests/test_lockstep.py"],
+    DDPG: [
+        "tests/test_ddpg.py",
+        "tests/test_devices.py",
+        "tests/test_lockstep.py",
+        "tests/test_study.py",
+    ],
     REPLAY: ["tests/test_devices.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
     STREAMS: [
         "tests/test_random_streams.py",
@@ -77,9 +83,36 @@ GUARDS = {
     PMATH: ONE_ROLLOUT,
     BEHAVIOUR: ["tests/test_behaviour.py", *ONE_ROLLOUT, "tests/test_calibration.py"],
     VERIFY: ["tests/test_verify.py"],
+    STUDY: ["tests/test_study.py"],
 }
 
 MUTANTS = [
+    # --- judging: how often, and what a judged policy is described from
+    Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
+    Mutant(
+        DDPG,
+        "self.steps[slots] // self.judge_every > previous_end // self.judge_every",
+        "self.steps[slots] // self.judge_every >= previous_end // self.judge_every",
+        "judge_every judges episodes that cross no multiple",
+    ),
+    Mutant(
+        STUDY,
+        "d = describe_rollout(nominal, self.env, row)",
+        "d = describe_rollout(nominal, self.env, 0)",
+        "judged policies described from the batch's first episode",
+    ),
+    Mutant(
+        STUDY,
+        "trainer.start_spread, trainer.judge_every = spread, config.judge_every",
+        "trainer.start_spread, trainer.judge_every = spread, 0",
+        "a resumed cell judges every episode",
+    ),
+    Mutant(
+        STUDY,
+        "if not self.judge_every:  # cells",
+        "if True:  # cells",
+        "judge_every is not a stored setting",
+    ),
     # --- DDPG: the lean update (the default learner)
     Mutant(
         LEAN,

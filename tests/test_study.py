@@ -14,8 +14,10 @@ import lonlib.calibration.study as study
 from lonlib.calibration import load_calibration, named_calibration, run_calibration
 from lonlib.calibration.study import CalibrationConfig, Cell, StartSpread, judged_summary
 from lonlib.ddpg.trainer import SlotTrainer, greedy_scores
+from lonlib.task.behaviour import describe_actors, describe_rollout, label
 from lonlib.task.pendulum import CoupledPendulums, PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
+from lonlib.task.rollout import Scoring
 
 TINY = named_calibration("tiny")
 BASE = TINY.cells[0]
@@ -68,14 +70,17 @@ def test_start_spread_refuses_negative_or_too_wide_half_widths_by_name():
         CalibrationConfig.from_mapping({"base": "tiny", "starts": {"angle": -1.0}})
 
 
-def trainer(spread, seeds=(1, 2, 3)):
+def trainer(spread, seeds=(1, 2, 3), judge_every=0):
     env = PendulumConfig(n_carts=2, steps=60)
     rng = np.random.default_rng(0)
     k = len(seeds)
     thetas = np.stack([actor_spec(2).initial(rng) for _ in range(k)])
     omegas = np.stack([critic_spec(2).initial(rng) for _ in range(k)])
     hp = dataclasses.replace(TINY.hp, batch_size=32)
-    return SlotTrainer(thetas, omegas, list(seeds), env, hp, start_spread=spread), thetas, env, hp
+    slots = SlotTrainer(
+        thetas, omegas, list(seeds), env, hp, start_spread=spread, judge_every=judge_every
+    )
+    return slots, thetas, env, hp
 
 
 def test_exploring_starts_spread_the_training_starts_but_not_the_greedy_evaluation():
@@ -192,13 +197,94 @@ def test_judged_labels_are_the_behaviour_labels_of_the_judged_policies():
         assert search["returned_fitness"] == search["best_all"]
 
 
+# ------------------------------------------------------------------ judging
+def test_a_judged_policy_is_described_from_the_rollout_that_scored_it():
+    slots, _, env, hp = trainer(None)
+    batches = []
+    slots.on_judged = lambda judged, nominal: batches.append((judged, nominal))
+    while slots.busy.any():
+        slots.step()
+    assert sum(len(judged) for judged, _ in batches) > 20
+    labels = set()
+    for judged, nominal in batches:
+        for row, (_, record, theta) in enumerate(judged):
+            ours = describe_rollout(nominal, env, row)
+            (alone,) = describe_actors(theta[None], env, Scoring(starts=1))
+            assert record.greedy_fitness == ours.fitness
+            robust = [f.name for f in dataclasses.fields(ours) if f.name.startswith("robust")]
+            assert math.isnan(ours.robust_mean)
+            assert dataclasses.replace(ours, **{name: 0.0 for name in robust}) == (
+                dataclasses.replace(alone, **{name: 0.0 for name in robust})
+            )
+            labels.add(label(ours))
+    assert len(labels) > 1  # the descriptors differ: the trace is each row's own
+
+
+def test_tracing_the_judge_changes_no_score():
+    scored, traced = trainer(None)[0], trainer(None)[0]
+    traced.on_judged = lambda judged, nominal: None
+    while scored.busy.any():
+        scored.step(), traced.step()
+    for a, b in zip(scored.results(), traced.results(), strict=True):
+        assert a.history == b.history and a.fitness == b.fitness
+
+
+@pytest.mark.parametrize("every", [1, 100, 250])
+def test_judge_every_judges_only_the_episodes_that_cross_its_multiples(every):
+    every_episode, sparse = trainer(None)[0], trainer(None, judge_every=every)[0]
+    while every_episode.busy.any():
+        every_episode.step(), sparse.step()
+    warmup = every_episode.hp.warmup_steps
+    for dense, search in zip(every_episode.results(), sparse.results(), strict=True):
+        ends = np.array([h.env_steps for h in search.history])
+        before = np.concatenate([[0], ends[:-1]])
+        expected = (ends >= warmup) & (ends // every > before // every)
+        judged = ~np.isnan([h.greedy_fitness for h in search.history])
+        np.testing.assert_array_equal(judged, expected)
+        assert 0 < judged.sum() < len(ends) or every == 1
+        # judging less changes which policies are judged, not the training
+        for a, b, was_judged in zip(dense.history, search.history, judged, strict=True):
+            assert a.episode_return == b.episode_return and a.env_steps == b.env_steps
+            assert not was_judged or a.greedy_fitness == b.greedy_fitness
+        best = max(h.greedy_fitness for h, j in zip(search.history, judged, strict=True) if j)
+        assert search.fitness == best
+
+
+def test_judge_every_is_refused_out_of_range_by_name():
+    with pytest.raises(ValueError, match="judge_every"):
+        trainer(None, judge_every=-1)
+    with pytest.raises(ValueError, match="judge_every"):
+        dataclasses.replace(TINY, judge_every=TINY.max_steps + 1)
+    with pytest.raises(ValueError, match="judge_every"):
+        CalibrationConfig.from_mapping({"base": "tiny", "judge_every": 1.5})
+
+
+def test_judge_every_is_a_stored_setting_only_when_set():
+    assert "judge_every" not in TINY.settings()  # cells stored before it judged every episode
+    assert dataclasses.replace(TINY, judge_every=100).settings()["judge_every"] == 100
+
+
+def test_a_cell_judged_every_100_env_steps_logs_only_those_policies():
+    config = dataclasses.replace(tiny_study(BASE), judge_every=100)
+    record, _ = study.run_cell(BASE, config)
+    dense, _ = study.run_cell(BASE, tiny_study(BASE))
+    for search, every_episode in zip(record["searches"], dense["searches"], strict=True):
+        ends = search["history_env_steps"]
+        judged = search["history_judged_env_steps"]
+        assert judged and set(judged) < set(every_episode["history_judged_env_steps"])
+        crossing = [e for e, b in zip(ends, [0, *ends[:-1]], strict=True) if e // 100 > b // 100]
+        assert judged == [e for e in crossing if e >= config.hp.warmup_steps]
+
+
 # ------------------------------------------------------------------ kill and resume
-def test_a_study_killed_mid_cell_resumes_to_the_same_cells(tmp_path, monkeypatch):
+@pytest.mark.parametrize("judge_every", [0, 100])
+def test_a_study_killed_mid_cell_resumes_to_the_same_cells(tmp_path, monkeypatch, judge_every):
     config = tiny_study(
         BASE,
         dataclasses.replace(BASE, exploring_starts=True),
         dataclasses.replace(BASE, continue_from=BASE.name),
     )
+    config = dataclasses.replace(config, judge_every=judge_every)
     options = {"progress": False, "checkpoint_seconds": 0, "check_steps": 50}
     whole = run_calibration(config, tmp_path / "whole", **options)
 

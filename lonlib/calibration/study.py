@@ -59,10 +59,10 @@ import pandas as pd
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.ddpg.trainer import DDPGConfig, LocalSearchResult, SlotTrainer
 from lonlib.storage.store import atomic_write, read_json, write_json
-from lonlib.task.behaviour import LABELS, describe_actors, label
+from lonlib.task.behaviour import LABELS, describe_actors, describe_rollout, label
 from lonlib.task.pendulum import PendulumConfig, total_energy, wrap_angle
 from lonlib.task.policy import actor_spec, critic_spec
-from lonlib.task.rollout import Scoring, run_policy
+from lonlib.task.rollout import Rollout, Scoring, run_policy
 from lonlib.util import portable_math
 from lonlib.util.validation import (
     check_choice,
@@ -259,6 +259,13 @@ class CalibrationConfig:
     """Environment steps every search trains (no early stop)."""
     batch_size: int = 256
     """DDPG minibatch size of every search."""
+    judge_every: int = 0
+    """Env steps between a search's greedy evaluations: a training episode's policy is
+    judged (scored, described, a candidate for the search's best) only when its end crosses
+    a multiple of ``judge_every``; 0 judges every episode, as the paper's local search.
+    Judging costs a greedy rollout of up to ``env.steps`` steps per judged policy, while
+    training episodes end every 30-150 env steps early on: a long study sets about
+    ``env.steps`` (docs/study-two-cart.md)."""
     env: PendulumConfig = field(default_factory=PendulumConfig)
     """The physics every cell starts from (cells replace motor, gain, tau, integrator, reward)."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
@@ -280,6 +287,7 @@ class CalibrationConfig:
         check_range("seed", self.seed, 0, 2**63 - 1)
         check_range("max_steps", self.max_steps, 1)
         check_range("batch_size", self.batch_size, 1)
+        check_range("judge_every", self.judge_every, 0, self.max_steps)
         check_range("drift_steps", self.drift_steps, 1, 100_000)
         for cell in self.cells:  # every cell's physics must be valid before any compute
             cell.env(self.env)
@@ -336,6 +344,8 @@ class CalibrationConfig:
         # invalidate stored cells.
         for key in CELL_PHYSICS:
             out["env"].pop(key)
+        if not self.judge_every:  # cells stored before the field existed judged every episode
+            out.pop("judge_every")
         out["record_format"] = RECORD_FORMAT
         return out
 
@@ -548,22 +558,22 @@ class JudgedLog:
     Per search (the trainer's tags are the seed indices) four lists in judge order (episode
     order): the env steps at the episode's end, the nominal episode's fitness under both
     aggregations (``fitness_all``, ``fitness_mean``) and the behaviour label's index in
-    :data:`lonlib.task.behaviour.LABELS`. One batched :func:`describe_actors` per judged
-    batch (nominal start of the DDPG scoring plus one perturbed start that is not used).
+    :data:`lonlib.task.behaviour.LABELS`. Each is read from the judge's own traced nominal
+    episode (:func:`lonlib.task.behaviour.describe_rollout`): no policy is rolled out twice.
     """
 
-    def __init__(self, env: PendulumConfig, scoring: Scoring, searches: int) -> None:
+    def __init__(self, env: PendulumConfig, searches: int) -> None:
         self.env = env
-        self.scoring = dataclasses.replace(scoring, starts=1)
         self.rows: dict[int, dict[str, list]] = {
             i: {"env_steps": [], "fitness_all": [], "fitness_mean": [], "label": []}
             for i in range(searches)
         }
 
-    def __call__(self, judged: list[tuple[Any, Any, np.ndarray]]) -> None:
-        """Describe a batch of ``(tag, EpisodeRecord, flat Actor)`` and log it."""
-        descriptors = describe_actors(np.stack([j[2] for j in judged]), self.env, self.scoring)
-        for (tag, record, _), d in zip(judged, descriptors, strict=True):
+    def __call__(self, judged: list[tuple[Any, Any, np.ndarray]], nominal: Rollout) -> None:
+        """Log a batch of ``(tag, EpisodeRecord, flat Actor)`` described from ``nominal``,
+        the judge's traced nominal episodes (row ``j``: entry ``j``)."""
+        for row, (tag, record, _) in enumerate(judged):
+            d = describe_rollout(nominal, self.env, row)
             rows = self.rows[int(tag)]
             rows["env_steps"].append(int(record.env_steps))
             rows["fitness_all"].append(d.fitness_all)
@@ -649,17 +659,19 @@ def run_cell(
     env = cell.env(config.env)
     hp = config.hp
     settings = {"cell": dataclasses.asdict(cell), **config.cell_settings(cell)}
-    log = JudgedLog(env, hp.scoring, config.seeds)
+    log = JudgedLog(env, config.seeds)
     checkpoint = CellCheckpoint(out, cell.name) if out is not None else None
     restored = checkpoint.load(settings) if checkpoint else None
     spread = config.starts.half_widths if cell.exploring_starts else None
     if restored is None:
         thetas, omegas, seeds = cell_starts(cell, config, out)
-        trainer = SlotTrainer(thetas, omegas, seeds, env, hp, start_spread=spread)
+        trainer = SlotTrainer(
+            thetas, omegas, seeds, env, hp, start_spread=spread, judge_every=config.judge_every
+        )
         trained_seconds = 0.0
     else:
         trainer, state = restored
-        trainer.start_spread = spread
+        trainer.start_spread, trainer.judge_every = spread, config.judge_every
         log.restore(state["judged"])
         trained_seconds = float(state["seconds"])
     trainer.on_judged = log

@@ -178,10 +178,11 @@ def describe_actors(
 
 
 def describe_rollout(
-    result: Rollout, config: PendulumConfig, row: int, robust: np.ndarray
+    result: Rollout, config: PendulumConfig, row: int, robust: np.ndarray | None = None
 ) -> BehaviourDescriptor:
     """The descriptor of row ``row`` of a traced rollout, with the fitness from its
-    perturbed starts ``robust [M]`` (summed left to right: defined bits)."""
+    perturbed starts ``robust [M]`` (summed left to right: defined bits); without them
+    the ``robust_*`` fields are NaN (the label does not read them)."""
     end = int(result.end_step[row])
     trace = result.trace.row(row, end)
     n = config.n_carts
@@ -196,7 +197,7 @@ def describe_rollout(
         0.0,
     )
     phase = float(np.mean(portable_math.cos(phi[:, :-1] - phi[:, 1:]))) if n > 1 else float("nan")
-    robust = np.asarray(robust, dtype=np.float64)
+    robust = np.asarray([np.nan] if robust is None else robust, dtype=np.float64)
     robust_mean = float(np.add.accumulate(robust)[-1] / robust.size)
     robust_var = np.add.accumulate((robust - robust_mean) ** 2)[-1] / robust.size
     return BehaviourDescriptor(

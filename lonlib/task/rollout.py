@@ -191,11 +191,11 @@ def run_actors(
     config: PendulumConfig,
     offsets: np.ndarray | None = None,
     eval_seed: int = 0,
-    trace: bool = False,
+    trace: bool | int = False,
 ) -> Rollout:
     """Greedy rollouts of flat Actors: ``thetas [B, P]`` one per row, from the nominal start
     (``offsets`` None: every row from :func:`nominal_offsets`) or from ``offsets [4, B, n]``;
-    or one Actor ``[P]`` from each start in ``offsets``."""
+    or one Actor ``[P]`` from each start in ``offsets``. ``trace`` as in :func:`run_policy`."""
     thetas = np.asarray(thetas)
     rows = thetas.shape[0] if thetas.ndim == 2 else 1
     policy = actor_policy(thetas, config)
@@ -280,10 +280,12 @@ def score_actors(
     config: PendulumConfig,
     scoring: Scoring = Scoring(),
     conditioning: bool | None = None,
+    trace: bool = False,
 ) -> Scores:
     """Score flat Actors ``[B, P]``: the nominal episode of each and, when ``conditioning``
     (default: when the estimate is ``robust``), its fitness from the ``M`` perturbed starts,
-    all in one batched rollout of ``B (1 + M)`` episodes."""
+    all in one batched rollout of ``B (1 + M)`` episodes. With ``trace`` the nominal
+    episodes keep every step (``Scores.nominal.trace``); the numbers do not change."""
     thetas = np.asarray(thetas)
     if thetas.ndim == 1:
         thetas = thetas[None]
@@ -291,12 +293,12 @@ def score_actors(
     measure = scoring.estimate == "robust" if conditioning is None else conditioning
     nominal = nominal_offsets(config, scoring.eval_seed)
     if not measure:
-        result = run_actors(thetas, config, np.repeat(nominal, rows, axis=1))
+        result = run_actors(thetas, config, np.repeat(nominal, rows, axis=1), trace=trace)
         return Scores(result.fitness, result, None, None, None)
     m = scoring.starts
     batch, offsets = conditioning_batch(thetas, config, scoring)
-    result = run_actors(batch, config, offsets)
-    head = Rollout(*(getattr(result, name)[:rows] for name in _ROLLOUT_ARRAYS))
+    result = run_actors(batch, config, offsets, trace=rows if trace else False)
+    head = Rollout(*(getattr(result, name)[:rows] for name in _ROLLOUT_ARRAYS), result.trace)
     robust = result.fitness[rows:].reshape(rows, m)
     mean = _sequential_mean(robust)
     return Scores(
