@@ -68,7 +68,7 @@ GUARDS = {
     DEVICES: ["tests/test_devices.py", "tests/test_random_streams.py", "tests/test_lockstep.py"],
     LOCKSTEP: ["tests/test_lockstep.py", "tests/test_drain.py"],
     CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
-    CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py"],
+    CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py", "tests/test_study.py"],
     LEAN: [
         "tests/test_ddpg.py",
         "tests/test_ddpg_update.py",
@@ -102,15 +102,9 @@ MUTANTS = [
         "judged policies described from the batch's first episode",
     ),
     Mutant(
-        STUDY,
-        "trainer.start_spread, trainer.judge_every = spread, config.judge_every",
-        "trainer.start_spread, trainer.judge_every = spread, 0",
-        "a resumed cell judges every episode",
-    ),
-    Mutant(
-        STUDY,
-        "if not self.judge_every:  # cells",
-        "if True:  # cells",
+        CONFIGS,
+        'if settings["ddpg"].get("judge_every") == 0:',
+        'if "judge_every" in settings["ddpg"]:',
         "judge_every is not a stored setting",
     ),
     # --- DDPG: the lean update (the default learner)

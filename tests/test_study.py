@@ -4,6 +4,7 @@ from best, the judged-policy summary, validation, and kill-and-resume of a cell 
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,11 +15,13 @@ import lonlib.calibration.study as study
 from lonlib.calibration import load_calibration, named_calibration, run_calibration
 from lonlib.calibration.study import CalibrationConfig, Cell, StartSpread, judged_summary
 from lonlib.ddpg.trainer import SlotTrainer, greedy_scores
+from lonlib.storage.configs import ExperimentConfig, named_config
 from lonlib.task.behaviour import describe_actors, describe_rollout, label
 from lonlib.task.pendulum import CoupledPendulums, PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.task.rollout import Scoring
 
+ROOT = Path(__file__).resolve().parents[1]
 TINY = named_calibration("tiny")
 BASE = TINY.cells[0]
 
@@ -76,11 +79,8 @@ def trainer(spread, seeds=(1, 2, 3), judge_every=0):
     k = len(seeds)
     thetas = np.stack([actor_spec(2).initial(rng) for _ in range(k)])
     omegas = np.stack([critic_spec(2).initial(rng) for _ in range(k)])
-    hp = dataclasses.replace(TINY.hp, batch_size=32)
-    slots = SlotTrainer(
-        thetas, omegas, list(seeds), env, hp, start_spread=spread, judge_every=judge_every
-    )
-    return slots, thetas, env, hp
+    hp = dataclasses.replace(TINY.hp, batch_size=32, judge_every=judge_every)
+    return SlotTrainer(thetas, omegas, list(seeds), env, hp, start_spread=spread), thetas, env, hp
 
 
 def test_exploring_starts_spread_the_training_starts_but_not_the_greedy_evaluation():
@@ -250,22 +250,33 @@ def test_judge_every_judges_only_the_episodes_that_cross_its_multiples(every):
         assert search.fitness == best
 
 
+def judging(config: CalibrationConfig, every: int) -> CalibrationConfig:
+    return dataclasses.replace(config, ddpg=dataclasses.replace(config.ddpg, judge_every=every))
+
+
 def test_judge_every_is_refused_out_of_range_by_name():
     with pytest.raises(ValueError, match="judge_every"):
         trainer(None, judge_every=-1)
     with pytest.raises(ValueError, match="judge_every"):
-        dataclasses.replace(TINY, judge_every=TINY.max_steps + 1)
+        judging(TINY, TINY.max_steps + 1)
     with pytest.raises(ValueError, match="judge_every"):
-        CalibrationConfig.from_mapping({"base": "tiny", "judge_every": 1.5})
+        CalibrationConfig.from_mapping({"base": "tiny", "ddpg": {"judge_every": 1.5}})
 
 
 def test_judge_every_is_a_stored_setting_only_when_set():
-    assert "judge_every" not in TINY.settings()  # cells stored before it judged every episode
-    assert dataclasses.replace(TINY, judge_every=100).settings()["judge_every"] == 100
+    assert "judge_every" not in TINY.settings()["ddpg"]  # stored cells judged every episode
+    assert judging(TINY, 100).settings()["ddpg"]["judge_every"] == 100
+    reference = json.loads((ROOT / "data/reference/manifest.json").read_text())["config"]
+    assert "judge_every" not in reference["ddpg"]  # stored before the field existed
+    stored = ExperimentConfig.from_mapping(reference)
+    assert stored.comparable() == named_config("reference").comparable()
+    assert "judge_every" not in stored.comparable()["ddpg"]
+    sparse = dataclasses.replace(stored, ddpg=dataclasses.replace(stored.ddpg, judge_every=500))
+    assert sparse.comparable()["ddpg"]["judge_every"] == 500
 
 
 def test_a_cell_judged_every_100_env_steps_logs_only_those_policies():
-    config = dataclasses.replace(tiny_study(BASE), judge_every=100)
+    config = judging(tiny_study(BASE), 100)
     record, _ = study.run_cell(BASE, config)
     dense, _ = study.run_cell(BASE, tiny_study(BASE))
     for search, every_episode in zip(record["searches"], dense["searches"], strict=True):
@@ -284,7 +295,7 @@ def test_a_study_killed_mid_cell_resumes_to_the_same_cells(tmp_path, monkeypatch
         dataclasses.replace(BASE, exploring_starts=True),
         dataclasses.replace(BASE, continue_from=BASE.name),
     )
-    config = dataclasses.replace(config, judge_every=judge_every)
+    config = judging(config, judge_every)
     options = {"progress": False, "checkpoint_seconds": 0, "check_steps": 50}
     whole = run_calibration(config, tmp_path / "whole", **options)
 
@@ -356,6 +367,7 @@ def test_the_two_cart_study_grid_reads_and_its_report_writes(tmp_path):
         ("height", False, default.name),
     }
     assert config.starts == StartSpread()  # the documented default distribution
+    assert config.ddpg.judge_every == 2000 == config.env.steps  # docs/study-two-cart.md
     # a tiny version of it runs end to end and writes the study's table and curves
     small = dataclasses.replace(
         config,
@@ -363,7 +375,7 @@ def test_the_two_cart_study_grid_reads_and_its_report_writes(tmp_path):
         max_steps=300,
         batch_size=32,
         env=dataclasses.replace(config.env, steps=60),
-        ddpg=dataclasses.replace(config.ddpg, buffer_size=500, warmup_steps=100),
+        ddpg=dataclasses.replace(config.ddpg, buffer_size=500, warmup_steps=100, judge_every=60),
     )
     result = run_calibration(small, tmp_path, progress=False)
     table = pd.read_csv(tmp_path / "study.csv")

@@ -58,6 +58,7 @@ import pandas as pd
 
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.ddpg.trainer import DDPGConfig, LocalSearchResult, SlotTrainer
+from lonlib.storage.configs import without_default_judging
 from lonlib.storage.store import atomic_write, read_json, write_json
 from lonlib.task.behaviour import LABELS, describe_actors, describe_rollout, label
 from lonlib.task.pendulum import PendulumConfig, total_energy, wrap_angle
@@ -259,13 +260,6 @@ class CalibrationConfig:
     """Environment steps every search trains (no early stop)."""
     batch_size: int = 256
     """DDPG minibatch size of every search."""
-    judge_every: int = 0
-    """Env steps between a search's greedy evaluations: a training episode's policy is
-    judged (scored, described, a candidate for the search's best) only when its end crosses
-    a multiple of ``judge_every``; 0 judges every episode, as the paper's local search.
-    Judging costs a greedy rollout of up to ``env.steps`` steps per judged policy, while
-    training episodes end every 30-150 env steps early on: a long study sets about
-    ``env.steps`` (docs/study-two-cart.md)."""
     env: PendulumConfig = field(default_factory=PendulumConfig)
     """The physics every cell starts from (cells replace motor, gain, tau, integrator, reward)."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
@@ -287,7 +281,6 @@ class CalibrationConfig:
         check_range("seed", self.seed, 0, 2**63 - 1)
         check_range("max_steps", self.max_steps, 1)
         check_range("batch_size", self.batch_size, 1)
-        check_range("judge_every", self.judge_every, 0, self.max_steps)
         check_range("drift_steps", self.drift_steps, 1, 100_000)
         for cell in self.cells:  # every cell's physics must be valid before any compute
             cell.env(self.env)
@@ -344,10 +337,8 @@ class CalibrationConfig:
         # invalidate stored cells.
         for key in CELL_PHYSICS:
             out["env"].pop(key)
-        if not self.judge_every:  # cells stored before the field existed judged every episode
-            out.pop("judge_every")
         out["record_format"] = RECORD_FORMAT
-        return out
+        return without_default_judging(out)
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> CalibrationConfig:
@@ -665,13 +656,11 @@ def run_cell(
     spread = config.starts.half_widths if cell.exploring_starts else None
     if restored is None:
         thetas, omegas, seeds = cell_starts(cell, config, out)
-        trainer = SlotTrainer(
-            thetas, omegas, seeds, env, hp, start_spread=spread, judge_every=config.judge_every
-        )
+        trainer = SlotTrainer(thetas, omegas, seeds, env, hp, start_spread=spread)
         trained_seconds = 0.0
     else:
         trainer, state = restored
-        trainer.start_spread, trainer.judge_every = spread, config.judge_every
+        trainer.start_spread = spread
         log.restore(state["judged"])
         trained_seconds = float(state["seconds"])
     trainer.on_judged = log

@@ -84,7 +84,6 @@ from lonlib.util.plain_data import (
     short_repr,
 )
 from lonlib.util.progress import progress_bar
-from lonlib.util.validation import check_range
 
 
 @dataclass
@@ -269,18 +268,20 @@ class SlotTrainer:
     runs over every slot, so a slot's learner state is restored to its start parameters
     when its warm-up ends if the batch touched it meanwhile (one copy per search).
 
-    Three optional public attributes, none part of :meth:`to_checkpoint` (a caller that
+    A training episode's policy is judged after every episode, or with ``hp.judge_every``
+    = ``J`` > 0 only when the episode's end crosses a multiple of ``J`` env steps of its
+    search.
+
+    Two optional public attributes, neither part of :meth:`to_checkpoint` (a caller that
     sets them sets them again on the restored batch): ``start_spread`` (four half-widths for
     x, x_dot, phi, phi_dot; constructor argument) makes every **training** episode start
     from the nominal state plus U[-w, w] per coordinate, drawn from the slot's start-noise
     stream, instead of ``initial_noise`` (exploring starts; the greedy evaluations keep the
-    scoring's starts); ``judge_every`` (env steps; constructor argument, 0 by default)
-    judges a training episode's policy only when the episode's end crosses a multiple of
-    ``judge_every`` env steps of its search (0: every episode, the paper's local search);
-    ``on_judged`` (a callable) receives, after every batched greedy evaluation, the list of
-    ``(tag, EpisodeRecord, flat Actor)`` it judged, in episode order, and the judge's own
-    nominal episodes (a :class:`lonlib.task.rollout.Rollout`, traced, row ``j`` the
-    episode of entry ``j``): what a judged policy did comes from the rollout that scored it.
+    scoring's starts); ``on_judged`` (a callable) receives, after every batched greedy
+    evaluation, the list of ``(tag, EpisodeRecord, flat Actor)`` it judged, in episode
+    order, and the judge's own nominal episodes (a :class:`lonlib.task.rollout.Rollout`,
+    traced, row ``j`` the episode of entry ``j``): what a judged policy did comes from the
+    rollout that scored it.
     """
 
     def __init__(
@@ -292,10 +293,8 @@ class SlotTrainer:
         hp: DDPGConfig,
         tags: Sequence[Any] | None = None,
         start_spread: Sequence[float] | None = None,
-        judge_every: int = 0,
     ) -> None:
         k = len(seeds)
-        check_range("judge_every", judge_every, 0, hp.max_steps)
         if k < 1:
             raise ValueError("at least one local search is needed")
         self._configure(env_config, hp, k, hp.device)
@@ -314,7 +313,6 @@ class SlotTrainer:
         self.pending: list[tuple[_Search, EpisodeRecord, np.ndarray, np.ndarray]] = []
         self.judge_batch = min(k, JUDGE_BATCH)
         self.start_spread = start_spread
-        self.judge_every = judge_every
         self.on_judged = None
         self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
 
@@ -524,17 +522,17 @@ class SlotTrainer:
     def _end_episodes(self, ended: np.ndarray) -> None:
         """Record the training episodes that ended and queue their policies for a greedy
         evaluation (the trained Actor and Critic as they are now; the start during the
-        warm-up, when the Actor still is the start); with ``judge_every``, only those whose
-        end crosses a multiple of it."""
+        warm-up, when the Actor still is the start); with ``hp.judge_every``, only those
+        whose end crosses a multiple of it."""
         hp = self.hp
         slots = np.flatnonzero(ended)
         trained = self.updates[slots] > 0
         candidate = trained | hp.count_start
-        if self.judge_every:
+        if every := hp.judge_every:
             previous_end = np.array(
                 [h[-1].env_steps if (h := self.searches[s].result.history) else 0 for s in slots]
             )
-            crossed = self.steps[slots] // self.judge_every > previous_end // self.judge_every
+            crossed = self.steps[slots] // every > previous_end // every
             candidate &= crossed
         rows = to_device(slots, self.device)
         flat_actor = flat_critic = None
@@ -709,7 +707,7 @@ class SlotTrainer:
         # JUDGE_BATCH is the most the constructor sets (fewer slots: as many), and a step
         # leaves fewer evaluations queued than that
         trainer.judge_batch = plain_int(plain["judge_batch"], "trainer.judge_batch", 1, JUDGE_BATCH)
-        trainer.start_spread, trainer.on_judged, trainer.judge_every = None, None, 0
+        trainer.start_spread, trainer.on_judged = None, None
         if len(trainer.pending) >= trainer.judge_batch:
             raise StateLayoutError("trainer.pending: more queued than a step leaves")
         reader.finish()

@@ -76,6 +76,13 @@ class DDPGConfig:
     U[-``robust_noise``, ``robust_noise``], drawn from ``robust_seed``, the same for every
     policy; :class:`lonlib.task.rollout.Scoring`). Every trial records both, whichever is used.
 
+    ``judge_every``: how often the search's policy is greedy-evaluated (judged: scored, a
+    candidate for the returned optimum). 0 (default) judges it after every training episode;
+    ``J`` > 0 judges it only after the episodes whose end crosses a multiple of ``J`` env
+    steps of the search. The paper does not say when its local search evaluates; judging
+    costs one greedy rollout (up to ``steps`` env steps) per judged policy, and training
+    episodes end every 30-150 env steps early on, so long searches set about ``steps``.
+
     ``device`` and ``threads`` say where the computation runs, not what it computes.
 
     ``update``: ``"lean"`` (:class:`lonlib.ddpg.lean.LeanDDPG`, hand-written passes, the
@@ -116,6 +123,8 @@ class DDPGConfig:
     """On equal greedy fitness, a higher greedy return counts as progress."""
     count_start: bool = False
     """The start parameters are candidates for the returned optimum."""
+    judge_every: int = 0
+    """Env steps between greedy evaluations (0: after every training episode)."""
     device: str = "cpu"
     """Where DDPG computes (``cpu``, ``cuda[:i]``); not what it computes."""
     threads: int = 1
@@ -141,6 +150,7 @@ class DDPGConfig:
         check_range("min_steps", self.min_steps, 0)
         check_range("eval_seed", self.eval_seed, 0, 2**63 - 1)
         check_range("threads", self.threads, 1, 256)
+        check_range("judge_every", self.judge_every, 0, self.max_steps)
         check_range("buffer_size", self.buffer_size, 1, 2**31 - 1)
         check_range("noise_std", self.noise_std, 0.0, 1.0)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
@@ -273,7 +283,15 @@ class ExperimentConfig:
             out.pop(key)
         for key in EXECUTION_ONLY_DDPG_FIELDS:
             out["ddpg"].pop(key)
-        return out
+        return without_default_judging(out)
+
+
+def without_default_judging(settings: dict[str, Any]) -> dict[str, Any]:
+    """``settings`` without ``ddpg.judge_every`` where it is 0: results stored before the
+    field existed judged every episode, which is what 0 means, so they stay comparable."""
+    if settings["ddpg"].get("judge_every") == 0:
+        settings["ddpg"].pop("judge_every")
+    return settings
 
 
 def _as_float(name: str, value: Any) -> float:
