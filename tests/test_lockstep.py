@@ -452,3 +452,22 @@ def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
     remove_finished_checkpoints(tmp_path, todo=[(0.001, 1)])  # its run has ended
     assert not inflight_checkpoints(tmp_path)
     assert not list(folder.iterdir())
+
+
+def test_sparse_judging_gives_the_serial_trials_and_judges_fewer_policies(tmp_path):
+    config = dataclasses.replace(CONFIG, ddpg=dataclasses.replace(CONFIG.ddpg, judge_every=70))
+    run_experiment(config, tmp_path / "serial", progress=False, executor="serial")
+    run_experiment(config, tmp_path / "batch", progress=False, executor="lockstep", slots=3)
+    (trials, digest), (want_trials, want_digest) = (
+        stored(tmp_path / name) for name in ("batch", "serial")
+    )
+    pd.testing.assert_frame_equal(trials, want_trials)
+    assert digest.keys() == want_digest.keys()
+    histories = [value for value in digest.values() if isinstance(value, pd.DataFrame)]
+    for key, value in digest.items():
+        if isinstance(value, pd.DataFrame):
+            pd.testing.assert_frame_equal(value, want_digest[key], check_exact=True)
+        else:
+            assert value == want_digest[key], key
+    judged = pd.concat(histories)["greedy_fitness"].notna()
+    assert 0 < judged.sum() < 0.8 * len(judged)  # episodes of <= 40 steps, judged every 70
