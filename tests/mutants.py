@@ -807,6 +807,9 @@ def main(argv: list[str]) -> int:
         at = argv.index("--jobs")
         jobs = int(argv[at + 1])
         argv = argv[:at] + argv[at + 2 :]
+    if argv and argv[0] in ("-h", "--help"):
+        print(__doc__.strip() + "\n\nusage: python tests/mutants.py [WORDS] [--jobs N]")
+        return 0
     selected = [m for m in MUTANTS if not argv or argv[0] in m.why]
     with tempfile.TemporaryDirectory(prefix="lonlib-mutants-") as tmp:
         free: queue.Queue[Path] = queue.Queue()
