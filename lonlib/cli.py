@@ -274,7 +274,7 @@ def _verify(args: argparse.Namespace) -> None:
 
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import load_calibration, run_calibration, with_overrides
-    from lonlib.calibration.report import calibration_block, readme_markers
+    from lonlib.calibration.report import calibration_block, readme_markers, write_outputs
     from lonlib.util.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)
@@ -290,7 +290,10 @@ def _calibrate(args: argparse.Namespace) -> None:
             "Nothing computed or written."
         )
         return
-    result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
+    if args.stored_only:
+        result = write_outputs(config, args.out, stored_only=True)
+    else:
+        result = run_calibration(config, args.out, workers=args.workers, progress=not args.quiet)
     if readme is not None:
         body = calibration_block(
             args.out, (Path(args.out) / "calibration.md").read_text(), config.name
@@ -447,6 +450,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PAGE",
         help="also paste the cell table between the grid's calibration markers of this Markdown "
         "page (docs/calibration.md; --readme is the former name)",
+    )
+    calibrate.add_argument(
+        "--stored-only",
+        action="store_true",
+        help="train nothing: write the tables, figures and --docs table of the cells stored "
+        "so far (at least one), naming the cells not finished yet",
     )
     calibrate.set_defaults(func=_calibrate)
     for verb in sub.choices.values():

@@ -9,11 +9,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 
 import lonlib.calibration.inflight as inflight
 import lonlib.calibration.study as study
 from lonlib.calibration import load_calibration, named_calibration, run_calibration
-from lonlib.calibration.study import CalibrationConfig, Cell, StartSpread, judged_summary
+from lonlib.calibration.report import readme_markers, write_outputs
+from lonlib.calibration.study import (
+    CalibrationConfig,
+    Cell,
+    StartSpread,
+    json_roundtrip,
+    judged_summary,
+)
+from lonlib.cli import main
 from lonlib.ddpg.trainer import SlotTrainer, greedy_scores
 from lonlib.storage.configs import ExperimentConfig, named_config
 from lonlib.task.behaviour import describe_actors, describe_rollout, label
@@ -285,6 +294,31 @@ def test_a_cell_judged_every_100_env_steps_logs_only_those_policies():
         assert judged and set(judged) < set(every_episode["history_judged_env_steps"])
         crossing = [e for e, b in zip(ends, [0, *ends[:-1]], strict=True) if e // 100 > b // 100]
         assert judged == [e for e in crossing if e >= config.hp.warmup_steps]
+
+
+# ------------------------------------------------------------------ a study in progress
+def test_the_stored_cells_of_an_unfinished_study_are_reported_without_training(
+    tmp_path, monkeypatch
+):
+    explore = dataclasses.replace(BASE, exploring_starts=True)
+    config = tiny_study(BASE, explore)
+    run_calibration(tiny_study(BASE), tmp_path, progress=False)  # the first cell only
+    with pytest.raises(ValueError, match="not finished yet.*explore"):
+        write_outputs(config, tmp_path)
+    monkeypatch.setattr(study, "run_cell", lambda *a, **k: pytest.fail("trained"))
+    page = tmp_path / "page.md"
+    begin, end = readme_markers(config.name)
+    page.write_text(f"# study\n{begin}\n{end}\n")
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(yaml.safe_dump(json_roundtrip(config.to_dict())))
+    main(["calibrate", str(tmp_path), "--grid", str(grid), "--stored-only", "--docs", str(page)])
+    table = pd.read_csv(tmp_path / "study.csv")
+    assert list(table["cell"]) == [BASE.name]
+    markdown = (tmp_path / "calibration.md").read_text()
+    assert f"Cells not finished yet: `{explore.name}`" in markdown
+    assert f"Cells not finished yet: `{explore.name}`" in page.read_text()
+    with pytest.raises(ValueError, match="not finished yet"):
+        write_outputs(tiny_study(explore), tmp_path, stored_only=True)  # none stored
 
 
 # ------------------------------------------------------------------ kill and resume

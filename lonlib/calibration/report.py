@@ -343,13 +343,20 @@ class CalibrationResult:
     files: list[Path]
 
 
-def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResult:
-    """Build the tables and figure from the stored cells and write them into ``out``."""
+def write_outputs(
+    config: CalibrationConfig, out: str | Path, stored_only: bool = False
+) -> CalibrationResult:
+    """Build the tables and figure from the stored cells and write them into ``out``.
+
+    Every cell must be stored, or with ``stored_only`` at least one: the tables then hold
+    the stored cells and ``calibration.md`` names the cells not finished yet (a study that
+    runs across sessions reports what it has)."""
     out = Path(out)
     records = [read_cell(out, cell, config) for cell in config.cells]
     missing = [cell.name for cell, record in zip(config.cells, records, strict=True) if not record]
-    if missing:
+    if missing and (not stored_only or len(missing) == len(records)):
         raise ValueError(f"{out}: cells not finished yet: {missing}")
+    records = [record for record in records if record]
     searches = search_table(records)
     cells = cell_table(searches, records)
     drift = integrator_drift(config.env, config.drift_steps)
@@ -369,6 +376,9 @@ def write_outputs(config: CalibrationConfig, out: str | Path) -> CalibrationResu
         curves = study_figure(best)
         atomic_write(files[-1], png_bytes(curves))
         plt.close(curves)
+    if missing:  # first: a docs block keeps what comes before the drift table
+        names = ", ".join(f"`{name}`" for name in missing)
+        markdown = f"*Cells not finished yet: {names}.*\n\n{markdown}"
     files.append(out / "calibration.md")
     atomic_write(files[-1], markdown.encode())
     png = out / "calibration.png"
