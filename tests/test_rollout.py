@@ -2,6 +2,7 @@
 the conditioning, and that every consumer delegates to it."""
 
 import ast
+import dataclasses
 import hashlib
 import json
 import os
@@ -272,3 +273,20 @@ def test_negative_seeds_are_refused_by_name(field):
     name = "robust_seed" if field == "seed" else "eval_seed"
     with pytest.raises(ValueError, match=name):
         DDPGConfig(**{name: -1})
+
+
+@pytest.mark.parametrize("estimate", ["nominal", "robust"])
+def test_a_traced_scoring_keeps_every_number_and_traces_the_nominal_episodes(estimate):
+    thetas = actors(31, 4)
+    scoring = Scoring(estimate=estimate, starts=3)
+    plain, traced = (
+        score_actors(thetas, SHORT, scoring),
+        score_actors(thetas, SHORT, scoring, trace=True),
+    )
+    assert plain.nominal.trace is None
+    np.testing.assert_array_equal(plain.fitness, traced.fitness)
+    assert fingerprint(plain.nominal) == fingerprint(
+        dataclasses.replace(traced.nominal, trace=None)
+    )
+    alone = run_actors(thetas, SHORT, trace=True)  # each Actor's nominal episode, traced
+    assert fingerprint(traced.nominal) == fingerprint(alone)

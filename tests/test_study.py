@@ -13,7 +13,12 @@ import yaml
 
 import lonlib.calibration.inflight as inflight
 import lonlib.calibration.study as study
-from lonlib.calibration import load_calibration, named_calibration, run_calibration
+from lonlib.calibration import (
+    load_calibration,
+    named_calibration,
+    run_calibration,
+    with_overrides,
+)
 from lonlib.calibration.report import readme_markers, write_outputs
 from lonlib.calibration.study import (
     CalibrationConfig,
@@ -23,12 +28,12 @@ from lonlib.calibration.study import (
     judged_summary,
 )
 from lonlib.cli import main
-from lonlib.ddpg.trainer import SlotTrainer, greedy_scores
+from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer, greedy_scores
 from lonlib.storage.configs import ExperimentConfig, named_config
 from lonlib.task.behaviour import describe_actors, describe_rollout, label
 from lonlib.task.pendulum import CoupledPendulums, PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
-from lonlib.task.rollout import Scoring
+from lonlib.task.rollout import Scoring, nominal_offsets, run_actors
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = named_calibration("tiny")
@@ -82,13 +87,13 @@ def test_start_spread_refuses_negative_or_too_wide_half_widths_by_name():
         CalibrationConfig.from_mapping({"base": "tiny", "starts": {"angle": -1.0}})
 
 
-def trainer(spread, seeds=(1, 2, 3), judge_every=0):
-    env = PendulumConfig(n_carts=2, steps=60)
+def trainer(spread, seeds=(1, 2, 3), judge_every=0, **ddpg):
+    env = PendulumConfig(n_carts=2, steps=60, upright_angle=3.05)  # both aggregations > 0
     rng = np.random.default_rng(0)
     k = len(seeds)
     thetas = np.stack([actor_spec(2).initial(rng) for _ in range(k)])
     omegas = np.stack([critic_spec(2).initial(rng) for _ in range(k)])
-    hp = dataclasses.replace(TINY.hp, batch_size=32, judge_every=judge_every)
+    hp = dataclasses.replace(TINY.hp, batch_size=32, judge_every=judge_every, **ddpg)
     return SlotTrainer(thetas, omegas, list(seeds), env, hp, start_spread=spread), thetas, env, hp
 
 
@@ -207,56 +212,117 @@ def test_judged_labels_are_the_behaviour_labels_of_the_judged_policies():
 
 
 # ------------------------------------------------------------------ judging
-def test_a_judged_policy_is_described_from_the_rollout_that_scored_it():
-    slots, _, env, hp = trainer(None)
+def finish(*trainers: SlotTrainer) -> list[list[LocalSearchResult]]:
+    """Step the trainers together until every search ended; each one's results by tag."""
+    done: list[dict] = [{} for _ in trainers]
+    while any(t.busy.any() for t in trainers):
+        for t, out in zip(trainers, done, strict=True):
+            out.update(t.step() if t.busy.any() else [])
+    return [[out[tag] for tag in sorted(out)] for out in done]
+
+
+def timeless(history):
+    return [dataclasses.replace(h, seconds=0.0) for h in history]
+
+
+@pytest.mark.parametrize("estimate", ["nominal", "robust"])
+def test_a_judged_policy_is_described_from_the_rollout_that_scored_it(estimate):
+    slots, _, env, hp = trainer(None, fitness_estimate=estimate, robust_starts=2)
     batches = []
-    slots.on_judged = lambda judged, nominal: batches.append((judged, nominal))
-    while slots.busy.any():
-        slots.step()
-    assert sum(len(judged) for judged, _ in batches) > 20
-    labels = set()
-    for judged, nominal in batches:
-        for row, (_, record, theta) in enumerate(judged):
-            ours = describe_rollout(nominal, env, row)
-            (alone,) = describe_actors(theta[None], env, Scoring(starts=1))
-            assert record.greedy_fitness == ours.fitness
-            robust = [f.name for f in dataclasses.fields(ours) if f.name.startswith("robust")]
-            assert math.isnan(ours.robust_mean)
-            assert dataclasses.replace(ours, **{name: 0.0 for name in robust}) == (
-                dataclasses.replace(alone, **{name: 0.0 for name in robust})
-            )
-            labels.add(label(ours))
-    assert len(labels) > 1  # the descriptors differ: the trace is each row's own
+    log = study.JudgedLog(env, 3)
+    slots.on_judged = lambda judged, nominal: (batches.append(judged), log(judged, nominal))
+    (results,) = finish(slots)
+    assert len(results) == 3
+    judged = [entry for batch in batches for entry in batch]
+    assert len(judged) > 20
+    alone = describe_actors(np.stack([j[2] for j in judged]), env, Scoring(starts=1))
+    for tag in range(3):
+        mine = [d for (t, _, _), d in zip(judged, alone, strict=True) if t == tag]
+        rows = log.rows[tag]
+        assert rows["env_steps"] == [r.env_steps for t, r, _ in judged if t == tag]
+        assert rows["fitness_all"] == [d.fitness_all for d in mine]
+        assert rows["fitness_mean"] == [d.fitness_mean for d in mine]
+        assert rows["label"] == [study.LABELS.index(label(d)) for d in mine]
+    assert any(d.fitness_all != d.fitness_mean for d in alone)  # two carts: they differ
+    assert len({label(d) for d in alone}) > 1
+    for (_, record, _), d in zip(judged, alone, strict=True):
+        if estimate == "nominal":
+            assert record.greedy_fitness == d.fitness
 
 
-def test_tracing_the_judge_changes_no_score():
-    scored, traced = trainer(None)[0], trainer(None)[0]
+def test_a_described_rollout_is_describe_actors_without_the_robust_fields():
+    slots, thetas, env, _ = trainer(None)
+    nominal = run_actors(thetas, env, np.repeat(nominal_offsets(env), 3, axis=1), trace=True)
+    for row, alone in enumerate(describe_actors(thetas, env, Scoring(starts=1))):
+        ours = describe_rollout(nominal, env, row)
+        robust = {f.name: 0.0 for f in dataclasses.fields(ours) if f.name.startswith("robust")}
+        assert math.isnan(ours.robust_mean)
+        assert dataclasses.replace(ours, **robust) == dataclasses.replace(alone, **robust)
+
+
+@pytest.mark.parametrize("estimate", ["nominal", "robust"])
+def test_tracing_the_judge_changes_no_score(estimate):
+    options = {"fitness_estimate": estimate, "robust_starts": 2}
+    scored, traced = trainer(None, **options)[0], trainer(None, **options)[0]
     traced.on_judged = lambda judged, nominal: None
-    while scored.busy.any():
-        scored.step(), traced.step()
-    for a, b in zip(scored.results(), traced.results(), strict=True):
-        assert a.history == b.history and a.fitness == b.fitness
+    ours, theirs = finish(scored, traced)
+    assert len(ours) == 3
+    for a, b in zip(ours, theirs, strict=True):
+        assert timeless(a.history) == timeless(b.history) and a.fitness == b.fitness
+        np.testing.assert_array_equal(a.theta, b.theta)
 
 
-@pytest.mark.parametrize("every", [1, 100, 250])
-def test_judge_every_judges_only_the_episodes_that_cross_its_multiples(every):
-    every_episode, sparse = trainer(None)[0], trainer(None, judge_every=every)[0]
-    while every_episode.busy.any():
-        every_episode.step(), sparse.step()
-    warmup = every_episode.hp.warmup_steps
-    for dense, search in zip(every_episode.results(), sparse.results(), strict=True):
+@pytest.mark.parametrize(("every", "count_start"), [(1, False), (100, False), (250, True)])
+def test_judge_every_judges_only_the_episodes_that_cross_its_multiples(every, count_start):
+    dense, sparse = finish(
+        trainer(None, count_start=count_start)[0],
+        trainer(None, judge_every=every, count_start=count_start)[0],
+    )
+    assert len(sparse) == 3
+    warmup = TINY.hp.warmup_steps
+    for everyone, search in zip(dense, sparse, strict=True):
         ends = np.array([h.env_steps for h in search.history])
         before = np.concatenate([[0], ends[:-1]])
-        expected = (ends >= warmup) & (ends // every > before // every)
+        crossing = ends // every > before // every
+        expected = ((ends >= warmup) | count_start) & crossing
         judged = ~np.isnan([h.greedy_fitness for h in search.history])
         np.testing.assert_array_equal(judged, expected)
         assert 0 < judged.sum() < len(ends) or every == 1
         # judging less changes which policies are judged, not the training
-        for a, b, was_judged in zip(dense.history, search.history, judged, strict=True):
+        for a, b, was_judged in zip(everyone.history, search.history, judged, strict=True):
             assert a.episode_return == b.episode_return and a.env_steps == b.env_steps
             assert not was_judged or a.greedy_fitness == b.greedy_fitness
         best = max(h.greedy_fitness for h, j in zip(search.history, judged, strict=True) if j)
-        assert search.fitness == best
+        assert search.fitness == max(best, search.start_fitness if count_start else best)
+
+
+def test_judge_every_must_leave_room_for_the_patience():
+    hp = dataclasses.replace(TINY.hp, min_steps=0, patience_steps=250, judge_every=300)
+    with pytest.raises(ValueError, match="judge_every must be < ddpg.patience_steps"):
+        ExperimentConfig(ddpg=hp)
+    with pytest.raises(ValueError, match="judge_every must be < ddpg.patience_steps"):
+        trainer(None, min_steps=0, patience_steps=250, judge_every=300)
+    ExperimentConfig(ddpg=dataclasses.replace(hp, min_steps=hp.max_steps))  # no patience
+    ExperimentConfig(ddpg=dataclasses.replace(hp, judge_every=249))
+
+
+def test_a_study_budget_is_not_checked_against_the_ddpg_sections_own_budget():
+    config = CalibrationConfig.from_mapping(
+        {"base": "tiny", "max_steps": 1_000_000, "ddpg": {"judge_every": 200_000}}
+    )
+    assert config.hp.judge_every == 200_000
+    assert with_overrides(load_calibration("configs/study-two-cart.yaml"), None, 1000, None)
+
+
+def test_a_trainer_checkpoint_names_judge_every_only_when_set_and_reads_without_it():
+    zero, every = trainer(None)[0], trainer(None, judge_every=100)[0]
+    plain_zero, _ = zero.to_checkpoint()
+    plain_every, tensors = every.to_checkpoint()
+    assert "judge_every" not in plain_zero["ddpg"]  # the layout of checkpoints before it
+    assert plain_every["ddpg"]["judge_every"] == 100
+    assert SlotTrainer.checkpoint_configs(plain_zero)[1].judge_every == 0
+    restored = SlotTrainer.from_checkpoint(plain_every, tensors)
+    assert restored.hp.judge_every == 100
 
 
 def judging(config: CalibrationConfig, every: int) -> CalibrationConfig:
@@ -267,7 +333,7 @@ def test_judge_every_is_refused_out_of_range_by_name():
     with pytest.raises(ValueError, match="judge_every"):
         trainer(None, judge_every=-1)
     with pytest.raises(ValueError, match="judge_every"):
-        judging(TINY, TINY.max_steps + 1)
+        judging(TINY, -1)
     with pytest.raises(ValueError, match="judge_every"):
         CalibrationConfig.from_mapping({"base": "tiny", "ddpg": {"judge_every": 1.5}})
 

@@ -770,8 +770,9 @@ def judged_summary(
 def history_summary(steps: list[int], fitness: list[float]) -> dict[str, Any]:
     """Best greedy fitness of a trained policy (0 if none was judged), the env steps of the
     first non-zero one and of the first at least :data:`BALANCING_FITNESS` (None if never),
-    from a search's per-episode history. Episodes before the first update carry no greedy
-    fitness (NaN) and are skipped."""
+    from a search's per-episode history. Episodes whose policy was not judged (before the
+    first update, or between two multiples of ``judge_every``) carry no greedy fitness (NaN)
+    and are skipped."""
     judged = [(s, f) for s, f in zip(steps, fitness, strict=True) if not math.isnan(f)]
     nonzero = [s for s, f in judged if f > 0]
     balancing = [s for s, f in judged if f >= BALANCING_FITNESS]

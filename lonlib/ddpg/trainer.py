@@ -66,7 +66,7 @@ from lonlib.ddpg.streams import (
     WARMUP_ACTIONS,
     CounterStreams,
 )
-from lonlib.storage.configs import DDPGConfig
+from lonlib.storage.configs import DDPGConfig, check_judging, without_default_judging
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
 from lonlib.task.policy import NetSpec, actor_spec, critic_spec
 from lonlib.task.rollout import Scoring, score_actors
@@ -113,7 +113,7 @@ class LocalSearchResult:
     seconds: float
     stop_reason: str  # "patience" or "budget"
     updates: int = 0  # DDPG updates of this agent
-    final_evaluation: bool = False  # no training episode ended after the first update
+    final_evaluation: bool = False  # no policy was judged: the Actor at the stop was
     history: list[EpisodeRecord] = field(default_factory=list)
 
     @property
@@ -297,6 +297,7 @@ class SlotTrainer:
         k = len(seeds)
         if k < 1:
             raise ValueError("at least one local search is needed")
+        check_judging(hp)
         self._configure(env_config, hp, k, hp.device)
         thetas = check_parameters("theta", thetas, self.a_spec.n_params, k)
         omegas = check_parameters("omega", omegas, self.c_spec.n_params, k)
@@ -652,7 +653,7 @@ class SlotTrainer:
         plain = {
             "slots": self.slots,
             "env": dataclasses.asdict(self.env_config),
-            "ddpg": dataclasses.asdict(self.hp),
+            "ddpg": without_default_judging({"ddpg": dataclasses.asdict(self.hp)})["ddpg"],
             "judge_batch": self.judge_batch,
             "stream_seeds": list(self.streams.seeds),
             "sim_generator": generator_state(self.sim.rng),
@@ -667,7 +668,11 @@ class SlotTrainer:
         invalid)."""
         plain = plain_dict(plain, "trainer", CHECKPOINT_KEYS)
         env_config = config_from_plain(PendulumConfig, plain["env"], "trainer.env")
-        return env_config, config_from_plain(DDPGConfig, plain["ddpg"], "trainer.ddpg")
+        ddpg = plain["ddpg"]
+        if isinstance(ddpg, dict) and "judge_every" not in ddpg:
+            # written with judge_every 0, or before the setting existed (every episode then)
+            ddpg = {**ddpg, "judge_every": 0}
+        return env_config, config_from_plain(DDPGConfig, ddpg, "trainer.ddpg")
 
     @classmethod
     def from_checkpoint(cls, plain: Any, tensors: Any, device: str | None = None) -> SlotTrainer:

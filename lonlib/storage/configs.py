@@ -79,9 +79,12 @@ class DDPGConfig:
     ``judge_every``: how often the search's policy is greedy-evaluated (judged: scored, a
     candidate for the returned optimum). 0 (default) judges it after every training episode;
     ``J`` > 0 judges it only after the episodes whose end crosses a multiple of ``J`` env
-    steps of the search. The paper does not say when its local search evaluates; judging
-    costs one greedy rollout (up to ``steps`` env steps) per judged policy, and training
-    episodes end every 30-150 env steps early on, so long searches set about ``steps``.
+    steps of the search (above ``max_steps``: only the Actor at the stop is judged). The
+    paper does not say when its local search evaluates; judging costs one greedy rollout
+    (up to ``steps`` env steps) per judged policy, and training episodes end every 30-150
+    env steps early on, so long searches set about ``steps``. The patience counts from the
+    last judged improvement, so ``judge_every`` must be below ``patience_steps`` unless
+    ``min_steps`` = ``max_steps`` (:func:`check_judging`).
 
     ``device`` and ``threads`` say where the computation runs, not what it computes.
 
@@ -150,7 +153,7 @@ class DDPGConfig:
         check_range("min_steps", self.min_steps, 0)
         check_range("eval_seed", self.eval_seed, 0, 2**63 - 1)
         check_range("threads", self.threads, 1, 256)
-        check_range("judge_every", self.judge_every, 0, self.max_steps)
+        check_range("judge_every", self.judge_every, 0, 2**62)
         check_range("buffer_size", self.buffer_size, 1, 2**31 - 1)
         check_range("noise_std", self.noise_std, 0.0, 1.0)
         check_range("learning_rate", self.learning_rate, 0.0, 1.0, low_open=True)
@@ -231,6 +234,7 @@ class ExperimentConfig:
             raise ValueError(f"env must be a PendulumConfig, got {self.env!r}")
         if not isinstance(self.ddpg, DDPGConfig):
             raise ValueError(f"ddpg must be a DDPGConfig, got {self.ddpg!r}")
+        check_judging(self.ddpg)
 
     def basin_hopping(self, p: float) -> BasinHoppingConfig:
         """Algorithm 2's settings for perturbation strength ``p``."""
@@ -284,6 +288,20 @@ class ExperimentConfig:
         for key in EXECUTION_ONLY_DDPG_FIELDS:
             out["ddpg"].pop(key)
         return without_default_judging(out)
+
+
+def check_judging(hp: DDPGConfig) -> None:
+    """ValueError, naming both fields, if ``hp.judge_every`` leaves the patience no room: the
+    patience counts from the last judged improvement, so where it can stop a search
+    (``min_steps`` < ``max_steps``) a policy must be judged more often than every
+    ``patience_steps``. Checked where the stopping rule is final: by an experiment's
+    configuration and by the trainer (a calibration study replaces the budget first)."""
+    if hp.judge_every >= hp.patience_steps and hp.min_steps < hp.max_steps:
+        raise ValueError(
+            f"ddpg.judge_every must be < ddpg.patience_steps ({hp.patience_steps}) when "
+            "patience can stop a search (min_steps < max_steps): the patience counts from the "
+            f"last judged improvement, got {hp.judge_every!r}"
+        )
 
 
 def without_default_judging(settings: dict[str, Any]) -> dict[str, Any]:
