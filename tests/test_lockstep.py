@@ -455,7 +455,7 @@ def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
 
 
 def test_sparse_judging_gives_the_serial_trials_and_judges_fewer_policies(tmp_path):
-    config = dataclasses.replace(CONFIG, ddpg=dataclasses.replace(CONFIG.ddpg, judge_every=70))
+    config = dataclasses.replace(CONFIG, ddpg=dataclasses.replace(CONFIG.ddpg, judge_every=50))
     run_experiment(config, tmp_path / "serial", progress=False, executor="serial")
     run_experiment(config, tmp_path / "batch", progress=False, executor="lockstep", slots=3)
     (trials, digest), (want_trials, want_digest) = (
@@ -470,4 +470,4 @@ def test_sparse_judging_gives_the_serial_trials_and_judges_fewer_policies(tmp_pa
         else:
             assert value == want_digest[key], key
     judged = pd.concat(histories)["greedy_fitness"].notna()
-    assert 0 < judged.sum() < 0.8 * len(judged)  # episodes of <= 40 steps, judged every 70
+    assert 0 < judged.sum() < 0.8 * len(judged)  # episodes of <= 40 steps, judged every 50
