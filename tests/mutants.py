@@ -139,8 +139,8 @@ MUTANTS = [
     ),
     Mutant(
         CONFIGS,
-        'if settings["ddpg"].get("judge_every") == 0:',
-        'if "judge_every" in settings["ddpg"]:',
+        'if ddpg.get("judge_every") == 0:',
+        'if "judge_every" in ddpg:',
         "judge_every is not a stored setting",
     ),
     # --- DDPG: the lean update (the default learner)

@@ -338,7 +338,8 @@ class CalibrationConfig:
         for key in CELL_PHYSICS:
             out["env"].pop(key)
         out["record_format"] = RECORD_FORMAT
-        return without_default_judging(out)
+        out["ddpg"] = without_default_judging(out["ddpg"])
+        return out
 
     @classmethod
     def from_mapping(cls, values: dict[str, Any]) -> CalibrationConfig:

@@ -653,7 +653,7 @@ class SlotTrainer:
         plain = {
             "slots": self.slots,
             "env": dataclasses.asdict(self.env_config),
-            "ddpg": without_default_judging({"ddpg": dataclasses.asdict(self.hp)})["ddpg"],
+            "ddpg": without_default_judging(dataclasses.asdict(self.hp)),
             "judge_batch": self.judge_batch,
             "stream_seeds": list(self.streams.seeds),
             "sim_generator": generator_state(self.sim.rng),

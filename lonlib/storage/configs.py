@@ -287,7 +287,8 @@ class ExperimentConfig:
             out.pop(key)
         for key in EXECUTION_ONLY_DDPG_FIELDS:
             out["ddpg"].pop(key)
-        return without_default_judging(out)
+        out["ddpg"] = without_default_judging(out["ddpg"])
+        return out
 
 
 def check_judging(hp: DDPGConfig) -> None:
@@ -304,12 +305,12 @@ def check_judging(hp: DDPGConfig) -> None:
         )
 
 
-def without_default_judging(settings: dict[str, Any]) -> dict[str, Any]:
-    """``settings`` without ``ddpg.judge_every`` where it is 0: results stored before the
-    field existed judged every episode, which is what 0 means, so they stay comparable."""
-    if settings["ddpg"].get("judge_every") == 0:
-        settings["ddpg"].pop("judge_every")
-    return settings
+def without_default_judging(ddpg: dict[str, Any]) -> dict[str, Any]:
+    """DDPG settings (plain data) without ``judge_every`` where it is 0: results stored before
+    the field existed judged every episode, which is what 0 means, so they stay comparable."""
+    if ddpg.get("judge_every") == 0:
+        ddpg.pop("judge_every")
+    return ddpg
 
 
 def _as_float(name: str, value: Any) -> float:
