@@ -21,6 +21,9 @@ error and the next one runs), and the whole script keeps to a time budget
 5. **paper**: ``CONFIG=paper`` (2 x 100 runs, K = 200 in one batch) projected from section 3.
 
 With no GPU it runs every section on the CPU in small sizes (``--smoke``), to check the script.
+``CUDA_CHECK_SECTIONS`` (comma-separated names) runs some sections only; the rate rows'
+slot counts, batch sizes and ``ddpg.judge_every`` come from ``CUDA_CHECK_KS``,
+``CUDA_CHECK_BATCHES`` and ``CUDA_CHECK_JUDGE_EVERY``.
 """
 
 from __future__ import annotations
@@ -48,6 +51,12 @@ BUDGET = float(os.environ.get("CUDA_CHECK_SECONDS", "330"))
 # floor) to 150k (the budget) env steps (benchmarks/lockstep.py).
 PAPER_AGENT_STEPS = {"low": 200 * 6 * 60_000, "high": 200 * 10 * 150_000}
 T0 = time.perf_counter()
+JUDGE_EVERY = int(os.environ.get("CUDA_CHECK_JUDGE_EVERY", "0"))
+"""``ddpg.judge_every`` of the rate rows' trainers (0: every episode, the reference's)."""
+BATCHES = tuple(int(b) for b in os.environ.get("CUDA_CHECK_BATCHES", "256,2000").split(","))
+"""The batch sizes of the rate rows."""
+KS = tuple(int(k) for k in os.environ.get("CUDA_CHECK_KS", "1,16,64,256").split(","))
+"""The slot counts K of the rate rows."""
 UPDATE_TOLERANCE = 1e-5
 """CPU against CUDA after up to 1000 identical updates: the largest parameter difference over
 the largest parameter magnitude (docs/performance.md, *On a GPU*)."""
@@ -111,8 +120,11 @@ def update_rows(device: str, k: int = 4, batch: int = 2000, n: int = 1000) -> li
 
 
 # ------------------------------------------------------------------------------------ 2. K
-def trainer(k: int, batch: int, device: str, warmup: int = 300) -> SlotTrainer:
+def trainer(
+    k: int, batch: int, device: str, warmup: int = 300, judge_every: int = 0
+) -> SlotTrainer:
     hp = DDPGConfig(
+        judge_every=judge_every,
         batch_size=batch,
         warmup_steps=warmup,
         max_steps=10**9,
@@ -250,7 +262,7 @@ def greedy_rows(count: int = 256) -> list[dict]:
 def rate_row(k: int, batch: int, device: str, episode: int) -> dict:
     """Agent-steps per second of ``k`` slots over one training episode past the warm-up,
     and the share of that time in the host-side greedy rollouts."""
-    t = trainer(k, batch, device)
+    t = trainer(k, batch, device, judge_every=JUDGE_EVERY)
     judged = {"seconds": 0.0, "calls": 0, "policies": 0}
     judge = t._judge_pending
 
@@ -278,6 +290,7 @@ def rate_row(k: int, batch: int, device: str, episode: int) -> dict:
         "device": device if device == "cpu" else torch.cuda.get_device_name(),
         "batch": batch,
         "K": k,
+        "judge_every": JUDGE_EVERY,
         "steps": steps,
         "agent-steps/s": rate,
         "ms per step": 1e3 * seconds / steps,
@@ -387,7 +400,7 @@ def main(out: Path, smoke: bool) -> None:
         else {
             "updates": (4, 2000, 1000),
             "K": 1500,
-            "rates": ((1, 16, 64, 256), (256, 2000), 2000),
+            "rates": (KS, BATCHES, 2000),
             "profile": (200, 2000),
             "trials": 3000,
         }
