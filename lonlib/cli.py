@@ -208,6 +208,7 @@ def _lon(args: argparse.Namespace) -> None:
 
 def _analyse(args: argparse.Namespace) -> None:
     from lonlib.analysis.claims_report import claims_markdown, splice_readme
+    from lonlib.analysis.claims_rescored import side_by_side_markdown, splice_side_by_side
     from lonlib.analysis.pipeline import analyse
     from lonlib.analysis.summary import splice_summary, summary_markdown
 
@@ -236,6 +237,10 @@ def _analyse(args: argparse.Namespace) -> None:
             args.dir,
         )
         text = splice_summary(text, summary_markdown(result.summary), args.dir)
+        side = result.claims_side_by_side
+        text = splice_side_by_side(
+            text, side_by_side_markdown(side) if not side.empty else "", args.dir
+        )
         readme.write_text(text, encoding="utf-8")
         print(f"summary and claims tables pasted into {readme}")
     return None

@@ -31,6 +31,9 @@ from lonlib.analysis.claims import (
 )
 from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import README_BEGIN, README_END, claims_markdown, markdown_table
+from lonlib.analysis.claims_rescored import NOT_COMPUTED
+from lonlib.analysis.claims_rescored import README_BEGIN as ROBUST_BEGIN
+from lonlib.analysis.claims_rescored import README_END as ROBUST_END
 from lonlib.analysis.effect_size import bootstrap_delta_ci, cliffs_delta, compare_greater
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import README_END as SUMMARY_END
@@ -388,6 +391,7 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
     readme.write_text(
         f"intro\n{SUMMARY_BEGIN}\nold summary\n{SUMMARY_END}\n"
         f"{README_BEGIN}\nold table\n{README_END}\noutro\n"
+        f"{ROBUST_BEGIN}\nold robust\n{ROBUST_END}\n"
     )
     main(["analyse", str(folder), "--readme", str(readme)])
     after = hashes(folder)
@@ -415,7 +419,9 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
     assert pasted.startswith(f"intro\n{SUMMARY_BEGIN}\n*Generated from `{folder}`")
     assert f"{summary.strip()}\n{SUMMARY_END}\n{README_BEGIN}\n*Generated from" in pasted
     assert "old table" not in pasted and "old summary" not in pasted
-    assert pasted.endswith(f"{expected.strip()}\n{README_END}\noutro\n")
+    assert f"{expected.strip()}\n{README_END}\noutro\n" in pasted
+    # no stored Actors here, so the robust re-scoring is not computed, and says so
+    assert pasted.endswith(f"{NOT_COMPUTED.strip()}\n{ROBUST_END}\n")
     assert "written to" in capsys.readouterr().out
 
 

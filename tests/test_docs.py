@@ -23,6 +23,8 @@ from lonlib.analysis.claims import peaks_beside_paper
 from lonlib.analysis.claims_report import README_BEGIN as CLAIMS_BEGIN
 from lonlib.analysis.claims_report import README_END as CLAIMS_END
 from lonlib.analysis.claims_report import claims_markdown, splice_readme
+from lonlib.analysis.claims_rescored import README_BEGIN as ROBUST_BEGIN
+from lonlib.analysis.claims_rescored import side_by_side_markdown, splice_side_by_side
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import splice_summary, summary_markdown
 from lonlib.calibration.report import DRIFT_HEADER, README_BEGIN, README_END
@@ -124,6 +126,10 @@ def test_the_generated_tables_equal_what_the_code_generates_from_the_committed_d
     )
     assert splice_readme(page, claims, "data/reference") == page
     assert splice_generated(page, CLAIMS_BEGIN, CLAIMS_END, claims, "data/reference") == page
+    side = figures / "claims_nominal_robust.csv"
+    robust = side_by_side_markdown(pd.read_csv(side)) if side.exists() else ""
+    assert splice_side_by_side(page, robust, "data/reference") == page
+    assert ROBUST_BEGIN in page
 
 
 def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printed_once():
@@ -131,6 +137,7 @@ def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printe
     markers = [
         (SUMMARY_BEGIN, "<!-- summary:end -->"),
         (CLAIMS_BEGIN, CLAIMS_END),
+        (ROBUST_BEGIN, "<!-- claims-robust:end -->"),
         (README_BEGIN, README_END),
         ("<!-- calibration-one-cart:begin -->", "<!-- calibration-one-cart:end -->"),
         ("<!-- calibration-batch2000:begin -->", "<!-- calibration-batch2000:end -->"),

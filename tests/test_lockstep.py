@@ -455,7 +455,8 @@ def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
 
 
 def test_sparse_judging_gives_the_serial_trials_and_judges_fewer_policies(tmp_path):
-    config = dataclasses.replace(CONFIG, ddpg=dataclasses.replace(CONFIG.ddpg, judge_every=50))
+    sparse = dataclasses.replace(CONFIG.ddpg, judge_every=50)
+    config = dataclasses.replace(CONFIG, runs=2, ddpg=sparse)  # 4 runs through 3 slots
     run_experiment(config, tmp_path / "serial", progress=False, executor="serial")
     run_experiment(config, tmp_path / "batch", progress=False, executor="lockstep", slots=3)
     (trials, digest), (want_trials, want_digest) = (

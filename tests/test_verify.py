@@ -271,3 +271,17 @@ def test_a_start_fitness_that_its_rebuilt_start_does_not_score_is_an_error(damag
     rewrite(folder, p, r, damage)
     found = {(f.check, f.index) for f in verify_experiment(folder, recordings=False).errors}
     assert ("start", 0) in found and ("start", later) in found
+
+
+def test_a_robust_experiment_rescored_with_its_robust_mean_keeps_its_claims(robust_experiment):
+    """Sampled with the robust fitness, the LON re-scored with each node's replayed robust
+    mean is the LON itself: the same claims, written beside the nominal ones."""
+    from lonlib.analysis.pipeline import analyse
+
+    _, out, _ = robust_experiment
+    result = analyse(out, close_figures=True)
+    pd.testing.assert_frame_equal(result.claims_robust, result.claims)
+    table = result.claims_side_by_side
+    assert list(table["verdict (robust)"]) == list(table["verdict (nominal)"])
+    written = {path.name for path in result.files}
+    assert {"claims_robust.csv", "claims_nominal_robust.csv", "claims_nominal_robust.md"} <= written

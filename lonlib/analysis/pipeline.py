@@ -8,6 +8,7 @@ the figures and tables derived here).
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,11 @@ from lonlib.analysis.claims import (
 )
 from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import write_claims
+from lonlib.analysis.claims_rescored import (
+    claims_side_by_side,
+    rescore_trials,
+    side_by_side_markdown,
+)
 from lonlib.analysis.conditioning import (
     conditioning_by_label,
     edges_no_longer_improving,
@@ -91,6 +97,8 @@ class Analysis:
     retention: pd.DataFrame = field(default_factory=pd.DataFrame)  # keep share over noise
     conditioning: pd.DataFrame = field(default_factory=pd.DataFrame)  # per behaviour label
     peaks_aggregations: pd.DataFrame = field(default_factory=pd.DataFrame)  # all vs mean
+    claims_robust: pd.DataFrame = field(default_factory=pd.DataFrame)  # re-scored: robust mean
+    claims_side_by_side: pd.DataFrame = field(default_factory=pd.DataFrame)  # nominal | robust
     interactive: dict[str, Any] = field(default_factory=dict)
 
 
@@ -114,7 +122,9 @@ def analyse(
     ``close_figures`` closes each matplotlib figure once saved (it stays in the result and
     can still be displayed), so a notebook's inline backend does not show every figure at
     the end of the cell that called this. ``conditioning`` adds the nodes' conditioning
-    (replaying every stored Actor: about a minute for 40 optima on one core)."""
+    (replaying every stored Actor: about a minute for 40 optima on one core) and the claims
+    on the LONs re-scored with the robust mean beside the nominal ones
+    (``claims_robust.csv``, ``claims_nominal_robust.csv`` and ``.md``)."""
     folder = Path(folder)
     _, trials = load_experiment(folder)
     out = folder / "figures"
@@ -233,6 +243,7 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     result.retention = pd.concat(curves, ignore_index=True)
     save("retention", retention_plot(result.retention))
     result.conditioning = conditioning_by_label(nodes)
+    _claims_rescored(trials, replayed, result, out, bins, fitness_tolerance)
     edges = edges_no_longer_improving(trials, replayed)
     result.peaks_aggregations = peaks_under_both_aggregations(replayed, bins)
     for name, table in (
@@ -245,6 +256,30 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
+
+
+def _claims_rescored(trials, replayed, result, out, bins, fitness_tolerance) -> None:
+    """The claims on the LONs re-scored with each node's robust mean, beside the nominal
+    ones (:mod:`lonlib.analysis.claims_rescored`): ``claims_robust.csv``,
+    ``claims_nominal_robust.csv`` and ``.md``. Skipped, with a warning, when some accepted
+    trial has no stored Actor."""
+    try:
+        rescored = rescore_trials(trials, replayed)
+    except ValueError as error:
+        warnings.warn(f"claims under the robust fitness skipped: {error}", stacklevel=3)
+        return
+    result.claims_robust = claims_from_trials(rescored, bins, fitness_tolerance)
+    result.claims_side_by_side = claims_side_by_side(result.claims, result.claims_robust)
+    for name, table in (
+        ("claims_robust", result.claims_robust),
+        ("claims_nominal_robust", result.claims_side_by_side),
+    ):
+        path = out / f"{name}.csv"
+        table.to_csv(path, index=False)
+        result.files.append(path)
+    path = out / "claims_nominal_robust.md"
+    path.write_text(side_by_side_markdown(result.claims_side_by_side), encoding="utf-8")
+    result.files.append(path)
 
 
 def slug(text: str) -> str:
