@@ -1,7 +1,8 @@
 """MkDocs hooks.
 
 * The committed reference experiment's figures are part of the site (under
-  ``reference-figures/``), read from ``data/reference/figures/`` at build time, so the docs
+  ``reference-figures/``), read from ``data/reference/figures/`` at build time, and so are
+  the two-cart study's (``study-figures/``, from ``data/studies/two-cart/``), so the docs
   show the stored figures without a copy in ``docs/``.
 * The docstrings' Sphinx roles (``:class:`X```, ``:func:`~lonlib.a.f```, ...), which
   mkdocstrings renders as text, become code: a link to the object's API entry (through
@@ -17,6 +18,7 @@ from pathlib import Path
 from mkdocs.structure.files import File, Files
 
 FIGURES = Path(__file__).parent / "data" / "reference" / "figures"
+STUDY_FIGURES = Path(__file__).parent / "data" / "studies" / "two-cart"
 
 ROLE = re.compile(
     r":(?:class|func|meth|mod|data|attr|exc|obj|const|py:\w+):<code>(?P<target>[^<]+)</code>"
@@ -24,11 +26,11 @@ ROLE = re.compile(
 
 
 def on_files(files: Files, config) -> Files:
-    """Add every PNG of the reference experiment's figures to the site's files."""
-    for path in sorted(FIGURES.glob("*.png")):
-        files.append(
-            File.generated(config, f"reference-figures/{path.name}", abs_src_path=str(path))
-        )
+    """Add every PNG of the reference experiment's figures and of the two-cart study to the
+    site's files."""
+    for folder, prefix in ((FIGURES, "reference-figures"), (STUDY_FIGURES, "study-figures")):
+        for path in sorted(folder.glob("*.png")):
+            files.append(File.generated(config, f"{prefix}/{path.name}", abs_src_path=str(path)))
     return files
 
 

@@ -151,7 +151,9 @@ def test_a_continue_cell_starts_from_the_stored_best_actors_and_critics(tmp_path
     assert not np.array_equal(starts[0][0], starts[1][0])
     assert starts[1][2] != starts[0][2]  # fresh random streams
     record = json.loads((tmp_path / "cells" / f"{config.cells[1].name}.json").read_text())
-    source_record = json.loads((tmp_path / "cells" / f"{BASE.name}.json").read_text())
+    source_text = (tmp_path / "cells" / f"{BASE.name}.json").read_text()
+    assert "\n" not in source_text  # a compact record: its histories run to ~15k episodes
+    source_record = json.loads(source_text)
     assert [s["start_fitness"] for s in record["searches"]] == [
         s["returned_fitness"] for s in source_record["searches"]
     ]
@@ -489,3 +491,16 @@ def test_the_two_cart_study_grid_reads_and_its_report_writes(tmp_path):
     kept = f"!{default.name}.npz"
     assert (tmp_path / ".gitignore").read_text().split() == ["*.npz", "inflight/", ".*.tmp", kept]
     assert len(result.searches) == 2 * len(config.cells)
+
+
+def test_a_studys_docs_block_drops_the_drift_table_and_keeps_the_study_table():
+    from lonlib.calibration.report import DRIFT_HEADER, calibration_block
+
+    table = f"| cells |\n|---|\n\n{DRIFT_HEADER}\n|---|\n| euler |\n\n| study |\n|---|\n"
+    block = calibration_block("data/studies/two-cart", table, "two-cart")
+    assert DRIFT_HEADER not in block and "euler" not in block
+    assert block.endswith("| cells |\n|---|\n\n| study |\n|---|\n")
+    assert DRIFT_HEADER in calibration_block("data/calibration", table, "default")
+    assert calibration_block("x", f"| cells |\n\n{DRIFT_HEADER}\n| euler |", "g").endswith(
+        "| cells |\n"
+    )

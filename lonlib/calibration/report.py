@@ -279,9 +279,11 @@ def calibration_block(source: str | Path, table: str, grid: str) -> str:
     """The block ``lonlib calibrate --docs`` pastes for ``grid``: a line naming the folder
     ``source``, then ``table`` (``calibration.md``). The integrator drift table does not
     depend on the grid's cells, so only the default grid's block keeps it (the docs print it
-    once)."""
+    once); what follows it (a study's table) stays."""
     if grid != "default" and DRIFT_HEADER in table:
-        table = table[: table.index(DRIFT_HEADER)]
+        start = table.index(DRIFT_HEADER)
+        end = table.find("\n\n", start)
+        table = table[:start] + (table[end + 2 :] if end >= 0 else "")
     return f"*Generated from `{source}` by `lonlib calibrate`.*\n\n{table.strip()}\n"
 
 

@@ -115,9 +115,11 @@ def _fsync_folder(folder: Path) -> None:
         os.close(handle)
 
 
-def write_json(path: Path, payload: dict) -> None:
-    """Atomically write ``payload`` as indented JSON."""
-    atomic_write(path, json.dumps(payload, indent=2, default=str).encode())
+def write_json(path: Path, payload: dict, compact: bool = False) -> None:
+    """Atomically write ``payload`` as indented JSON (``compact``: without whitespace, for
+    records holding long lists, such as a study cell's per-episode histories)."""
+    layout = {"separators": (",", ":")} if compact else {"indent": 2}
+    atomic_write(path, json.dumps(payload, default=str, **layout).encode())
 
 
 def read_json(path: Path) -> dict:
