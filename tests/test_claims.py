@@ -393,7 +393,8 @@ def test_the_analysis_only_command_writes_figures_and_claims_and_changes_no_stor
         f"{README_BEGIN}\nold table\n{README_END}\noutro\n"
         f"{ROBUST_BEGIN}\nold robust\n{ROBUST_END}\n"
     )
-    main(["analyse", str(folder), "--readme", str(readme)])
+    with pytest.warns(UserWarning, match="robust fitness skipped.*no stored Actor"):
+        main(["analyse", str(folder), "--readme", str(readme)])
     after = hashes(folder)
     assert {k: v for k, v in after.items() if not k.startswith("figures/")} == before
     figures = folder / "figures"

@@ -8,12 +8,14 @@ import pytest
 
 from lonlib.analysis.claims import CONTRADICTED, REPRODUCED, claims_from_trials
 from lonlib.analysis.claims_rescored import (
+    FILES,
     README_BEGIN,
     README_END,
     claims_side_by_side,
     rescore_trials,
     side_by_side_markdown,
     splice_side_by_side,
+    write_robust_claims,
 )
 from lonlib.storage.store import read_experiment_trials
 from tests.test_claims import PAPER_LIKE, WORSE, verdicts, write_experiment
@@ -92,6 +94,51 @@ def test_an_accepted_trial_without_a_replayed_actor_is_refused(trials):
     rescore_trials(trials, replayed[keep])  # a rejected trial is not needed
     with pytest.raises(ValueError, match="no column 'robust_min'"):
         rescore_trials(trials, replayed, "robust_min")
+    nan = replayed.copy()
+    nan.loc[nan["accepted"].to_numpy().nonzero()[0][2], "robust_mean"] = np.nan
+    with pytest.raises(ValueError, match="no stored Actor, or NaN"):
+        rescore_trials(trials, nan)
+    with pytest.raises(ValueError, match=r"index \d+ is there twice"):
+        rescore_trials(trials, pd.concat([replayed, replayed.iloc[[5]]]))
+    nothing = replayed.iloc[:0].drop(columns="robust_mean")  # replay_optima without Actors
+    with pytest.raises(ValueError, match="run 0, index 0 has no replayed robust_mean"):
+        rescore_trials(trials, nothing)
+
+
+def test_the_side_by_side_table_goes_by_position_not_by_index(trials, nominal):
+    robust = claims_from_trials(rescore_trials(trials, replayed_as(trials, trials["fitness"] / 2)))
+    want = claims_side_by_side(nominal, robust)
+    shuffled = claims_side_by_side(nominal, robust.set_axis(robust.index[::-1]))
+    pd.testing.assert_frame_equal(shuffled, want)
+    assert list(want["n (robust)"]) == list(robust["n"])
+    assert list(want["n (nominal)"]) == list(nominal["n"])
+    row = robust.iloc[2]  # claim c: low < high
+    assert want["effect (robust)"][2] == (
+        f"{row['effect']:.4g} [{row['ci_low']:.4g}, {row['ci_high']:.4g}]"
+    )
+    assert want["effect (nominal)"][2].startswith(f"{nominal.iloc[2]['effect']:.4g} [")
+
+
+def test_robust_claims_are_written_or_skipped_with_a_warning(trials, nominal, tmp_path):
+    robust_values = trials["fitness"].to_numpy() * 0.5
+    replayed = replayed_as(trials, robust_values)
+    robust, side, paths = write_robust_claims(trials, replayed, nominal, tmp_path)
+    assert [p.name for p in paths] == list(FILES)
+    want = claims_from_trials(rescore_trials(trials, replayed))
+    pd.testing.assert_frame_equal(robust, want)
+    assert not robust.equals(nominal)
+    pd.testing.assert_frame_equal(side, claims_side_by_side(nominal, want))
+    assert (tmp_path / FILES[2]).read_text() == side_by_side_markdown(side)
+    stored = pd.read_csv(tmp_path / FILES[0])
+    assert list(stored["verdict"]) == list(want["verdict"])
+    assert np.allclose(stored["effect"], want["effect"], equal_nan=True)
+    # an accepted optimum without its Actor: a warning, and the earlier files go
+    first = trials[trials["accepted"]].iloc[0]
+    partial = replayed[~((replayed["run"] == first["run"]) & (replayed["index"] == first["index"]))]
+    with pytest.warns(UserWarning, match="robust fitness skipped: .*no stored Actor"):
+        robust, side, paths = write_robust_claims(trials, partial, nominal, tmp_path)
+    assert robust.empty and side.empty and paths == []
+    assert not any((tmp_path / name).exists() for name in FILES)
 
 
 def test_tables_of_different_claims_are_not_set_side_by_side(nominal):

@@ -424,6 +424,8 @@ def test_lockstep_workers_stop_when_their_parent_is_killed_and_the_run_resumes(r
         _wait_for(lambda: _rows(trials_path(out, P, 0)) >= 1, what="a first local search")
         children = _children(parent.pid)
         assert len(children) >= 2
+        # killed mid-run: the parent and its workers are alive, a run is unfinished
+        assert parent.poll() is None and all(_alive(c) for c in children)
         os.kill(parent.pid, signal.SIGKILL)
         parent.wait(timeout=30)
         _wait_for(lambda: not any(_alive(c) for c in children), seconds=60, what="orphans")
@@ -432,6 +434,7 @@ def test_lockstep_workers_stop_when_their_parent_is_killed_and_the_run_resumes(r
     for run in (0, 1):  # the locks are free again
         with exclusive_lock(run_dir(out, P, run) / ".lock", wait=False):
             pass
+    assert min(_rows(trials_path(out, P, run)) for run in (0, 1)) < SEARCHES
     trials = run_experiment(longer, out, progress=False, executor="lockstep", workers=2)
     assert sorted(trials.groupby("run").size()) == [SEARCHES, SEARCHES]
 

@@ -285,3 +285,60 @@ def test_a_robust_experiment_rescored_with_its_robust_mean_keeps_its_claims(robu
     assert list(table["verdict (robust)"]) == list(table["verdict (nominal)"])
     written = {path.name for path in result.files}
     assert {"claims_robust.csv", "claims_nominal_robust.csv", "claims_nominal_robust.md"} <= written
+
+
+def test_analyse_rescores_with_the_replayed_robust_means_and_pastes_them(
+    robust_experiment, tmp_path, monkeypatch
+):
+    """`lonlib analyse --docs` on an experiment whose replayed robust means differ from the
+    stored fitness (halved here): the robust claims are those of the LON re-scored with
+    them, beside the nominal ones in the files and the page."""
+    import io
+
+    from lonlib.analysis import pipeline
+    from lonlib.analysis.claims import claims_from_trials
+    from lonlib.analysis.claims_report import README_BEGIN as CLAIMS_BEGIN
+    from lonlib.analysis.claims_report import README_END as CLAIMS_END
+    from lonlib.analysis.claims_rescored import (
+        README_BEGIN,
+        README_END,
+        rescore_trials,
+        side_by_side_markdown,
+    )
+    from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
+    from lonlib.analysis.summary import README_END as SUMMARY_END
+
+    _, stored, trials = robust_experiment
+    out = tmp_path / "copy"
+    shutil.copytree(stored, out)
+    real = pipeline.replay_optima
+    halved = []
+
+    def replay_halved(*args, **kwargs):
+        replayed = real(*args, **kwargs)
+        halved.append(replayed.assign(robust_mean=replayed["robust_mean"] / 2))
+        return halved[-1]
+
+    monkeypatch.setattr(pipeline, "replay_optima", replay_halved)
+    page = tmp_path / "results.md"
+    page.write_text(
+        f"{SUMMARY_BEGIN}\n{SUMMARY_END}\n{CLAIMS_BEGIN}\n{CLAIMS_END}\n"
+        f"{README_BEGIN}\nold\n{README_END}\n"
+    )
+    cli_main(["analyse", str(out), "--docs", str(page)])
+    figures = out / "figures"
+    want = claims_from_trials(rescore_trials(trials, halved[0]))
+
+    def read_back(frame: pd.DataFrame) -> pd.DataFrame:
+        return pd.read_csv(io.StringIO(frame.to_csv(index=False)))
+
+    robust = pd.read_csv(figures / "claims_robust.csv")
+    pd.testing.assert_frame_equal(robust, read_back(want))
+    assert not robust.equals(pd.read_csv(figures / "claims.csv"))
+    side = pd.read_csv(figures / "claims_nominal_robust.csv")
+    assert list(side["verdict (robust)"]) == list(want["verdict"])
+    nominal = pd.read_csv(figures / "claims.csv")
+    assert list(side["verdict (nominal)"]) == list(nominal["verdict"])
+    pasted = page.read_text()
+    assert f"{side_by_side_markdown(side).strip()}\n{README_END}" in pasted
+    assert "old" not in pasted

@@ -11,8 +11,13 @@ accepted other searches.
 
 from __future__ import annotations
 
+import warnings
+from pathlib import Path
+
+import numpy as np
 import pandas as pd
 
+from lonlib.analysis.claims import claims_from_trials
 from lonlib.analysis.claims_report import cell, markdown_table
 from lonlib.util.readme_tables import splice_generated
 
@@ -21,8 +26,10 @@ README_BEGIN = "<!-- claims-robust:begin (lonlib analyse data/reference --docs d
 README_END = "<!-- claims-robust:end -->"
 NOT_COMPUTED = (
     "Not computed: the claims under the robust fitness need every accepted optimum's Actor "
-    "stored and replayed (`lonlib analyse` warns which one is missing).\n"
+    "stored and replayed (`lonlib analyse` warns why it skipped them).\n"
 )
+FILES = ("claims_robust.csv", "claims_nominal_robust.csv", "claims_nominal_robust.md")
+"""What :func:`write_robust_claims` writes under an experiment's ``figures/``."""
 
 
 def rescore_trials(
@@ -31,21 +38,27 @@ def rescore_trials(
     """``trials`` with each accepted trial's ``fitness`` replaced by ``replayed[column]`` of
     the same (p, run, index); rejected trials keep theirs (they are not LON nodes).
 
-    ValueError, naming the first one, when an accepted trial has no replayed row (its
-    Actor is not stored), since a LON re-scored in part would mix two fitnesses.
+    ValueError, naming the first one, when an accepted trial has no replayed value (its
+    Actor is not stored) or a NaN one, since a LON re-scored in part would mix two
+    fitnesses; and when ``replayed`` holds a (p, run, index) twice.
     """
     if column not in replayed:
-        raise ValueError(f"replayed: no column {column!r}")
+        if len(replayed):
+            raise ValueError(f"replayed: no column {column!r}")
+        replayed = replayed.assign(**{column: np.array([], float)})  # nothing replayed
     values = replayed.set_index(KEYS)[column]
+    if not values.index.is_unique:
+        p, run, index = values.index[values.index.duplicated()][0]
+        raise ValueError(f"replayed: p={p}, run {run}, index {index} is there twice")
     keys = pd.MultiIndex.from_frame(trials[KEYS])
     found = values.reindex(keys).to_numpy(float)
     accepted = trials["accepted"].to_numpy(bool)
-    missing = accepted & ~keys.isin(values.index)
+    missing = accepted & np.isnan(found)
     if missing.any():
         row = trials[missing].iloc[0]
         raise ValueError(
             f"trials: accepted trial p={row['p']}, run {int(row['run'])}, index "
-            f"{int(row['index'])} has no replayed {column} (no stored Actor)"
+            f"{int(row['index'])} has no replayed {column} (no stored Actor, or NaN)"
         )
     out = trials.copy()
     out.loc[accepted, "fitness"] = found[accepted]
@@ -64,15 +77,15 @@ def claims_side_by_side(nominal: pd.DataFrame, robust: pd.DataFrame) -> pd.DataF
     if list(nominal["claim"]) != list(robust["claim"]):
         raise ValueError("nominal and robust claims tables list different claims")
     return pd.DataFrame(
-        {
-            "claim": nominal["claim"],
-            "measure": nominal["measure"],
-            "n (nominal)": nominal["n"],
+        {  # by position: the two tables' indexes need not agree
+            "claim": nominal["claim"].to_numpy(),
+            "measure": nominal["measure"].to_numpy(),
+            "n (nominal)": nominal["n"].to_numpy(),
             "effect (nominal)": [_effect(r) for r in nominal.itertuples(False)],
-            "verdict (nominal)": nominal["verdict"],
-            "n (robust)": robust["n"],
+            "verdict (nominal)": nominal["verdict"].to_numpy(),
+            "n (robust)": robust["n"].to_numpy(),
             "effect (robust)": [_effect(r) for r in robust.itertuples(False)],
-            "verdict (robust)": robust["verdict"],
+            "verdict (robust)": robust["verdict"].to_numpy(),
         }
     )
 
@@ -86,6 +99,40 @@ def side_by_side_markdown(table: pd.DataFrame) -> str:
         + markdown_table(table)
         + "\n"
     )
+
+
+def write_robust_claims(
+    trials: pd.DataFrame,
+    replayed: pd.DataFrame,
+    nominal: pd.DataFrame,
+    out: str | Path,
+    bins: int = 50,
+    fitness_tolerance: float = 1e-9,
+) -> tuple[pd.DataFrame, pd.DataFrame, list[Path]]:
+    """The claims of the LONs of ``trials`` re-scored with the replayed robust means
+    (:func:`rescore_trials`) and their table beside the ``nominal`` claims
+    (:func:`claims_side_by_side`), written into the folder ``out`` as :data:`FILES`:
+    ``(robust claims, side-by-side table, paths written)``.
+
+    When the re-scoring is refused (an accepted optimum without a replayed Actor, as in an
+    experiment stored before Actors were kept) it warns why, removes the files an earlier
+    analysis left, and returns empty tables and no paths."""
+    out = Path(out)
+    try:
+        rescored = rescore_trials(trials, replayed)
+    except ValueError as error:
+        for name in FILES:
+            (out / name).unlink(missing_ok=True)
+        warnings.warn(f"claims under the robust fitness skipped: {error}", stacklevel=2)
+        return pd.DataFrame(), pd.DataFrame(), []
+    robust = claims_from_trials(rescored, bins, fitness_tolerance)
+    side = claims_side_by_side(nominal, robust)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / name for name in FILES]
+    robust.to_csv(paths[0], index=False)
+    side.to_csv(paths[1], index=False)
+    paths[2].write_text(side_by_side_markdown(side), encoding="utf-8")
+    return robust, side, paths
 
 
 def splice_side_by_side(readme: str, markdown: str, source: str) -> str:

@@ -8,7 +8,6 @@ the figures and tables derived here).
 from __future__ import annotations
 
 import re
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,11 +25,7 @@ from lonlib.analysis.claims import (
 )
 from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import write_claims
-from lonlib.analysis.claims_rescored import (
-    claims_side_by_side,
-    rescore_trials,
-    side_by_side_markdown,
-)
+from lonlib.analysis.claims_rescored import write_robust_claims
 from lonlib.analysis.conditioning import (
     conditioning_by_label,
     edges_no_longer_improving,
@@ -212,7 +207,8 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     config, _ = load_experiment(folder)
     replayed = replay_optima(folder, trials, config.env, config.ddpg.scoring)
     result.replayed = replayed
-    if replayed.empty:
+    if replayed.empty:  # no stored Actor: say so, and leave no stale robust claims
+        write_robust_claims(trials, replayed, result.claims, out, bins, fitness_tolerance)
         return
     nodes = replayed[replayed["accepted"]]
     curves = []
@@ -243,7 +239,10 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     result.retention = pd.concat(curves, ignore_index=True)
     save("retention", retention_plot(result.retention))
     result.conditioning = conditioning_by_label(nodes)
-    _claims_rescored(trials, replayed, result, out, bins, fitness_tolerance)
+    result.claims_robust, result.claims_side_by_side, files = write_robust_claims(
+        trials, replayed, result.claims, out, bins, fitness_tolerance
+    )
+    result.files += files
     edges = edges_no_longer_improving(trials, replayed)
     result.peaks_aggregations = peaks_under_both_aggregations(replayed, bins)
     for name, table in (
@@ -256,30 +255,6 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
-
-
-def _claims_rescored(trials, replayed, result, out, bins, fitness_tolerance) -> None:
-    """The claims on the LONs re-scored with each node's robust mean, beside the nominal
-    ones (:mod:`lonlib.analysis.claims_rescored`): ``claims_robust.csv``,
-    ``claims_nominal_robust.csv`` and ``.md``. Skipped, with a warning, when some accepted
-    trial has no stored Actor."""
-    try:
-        rescored = rescore_trials(trials, replayed)
-    except ValueError as error:
-        warnings.warn(f"claims under the robust fitness skipped: {error}", stacklevel=3)
-        return
-    result.claims_robust = claims_from_trials(rescored, bins, fitness_tolerance)
-    result.claims_side_by_side = claims_side_by_side(result.claims, result.claims_robust)
-    for name, table in (
-        ("claims_robust", result.claims_robust),
-        ("claims_nominal_robust", result.claims_side_by_side),
-    ):
-        path = out / f"{name}.csv"
-        table.to_csv(path, index=False)
-        result.files.append(path)
-    path = out / "claims_nominal_robust.md"
-    path.write_text(side_by_side_markdown(result.claims_side_by_side), encoding="utf-8")
-    result.files.append(path)
 
 
 def slug(text: str) -> str:
