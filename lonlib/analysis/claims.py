@@ -502,7 +502,7 @@ def claim_smaller_p_better(
     better = result.p_value < ALPHA and result.ci_low > 0
     worse = reverse < ALPHA and result.ci_high <= 0
     evidence = (
-        f"best fitness per run, p = 1e-4 vs 1e-3: median {np.median(x):.3f} vs "
+        f"each run's final incumbent, p = 1e-4 vs 1e-3: median fitness {np.median(x):.3f} vs "
         f"{np.median(y):.3f} ({len(x)} vs {len(y)} runs); one-sided Mann-Whitney U = "
         f"{result.u:.1f}, p = {result.p_value:.3g} (1e-4 greater), {reverse:.3g} (1e-4 less); "
         f"Cliff's delta {result.delta:+.2f}, {CONFIDENCE:.0%} bootstrap CI "
