@@ -207,8 +207,12 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     config, _ = load_experiment(folder)
     replayed = replay_optima(folder, trials, config.env, config.ddpg.scoring)
     result.replayed = replayed
-    if replayed.empty:  # no stored Actor: say so, and leave no stale robust claims
-        write_robust_claims(trials, replayed, result.claims, out, bins, fitness_tolerance)
+    # without stored Actors this warns and leaves no stale robust claims
+    result.claims_robust, result.claims_side_by_side, files = write_robust_claims(
+        trials, replayed, result.claims, out, bins, fitness_tolerance
+    )
+    result.files += files
+    if replayed.empty:
         return
     nodes = replayed[replayed["accepted"]]
     curves = []
@@ -239,10 +243,6 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     result.retention = pd.concat(curves, ignore_index=True)
     save("retention", retention_plot(result.retention))
     result.conditioning = conditioning_by_label(nodes)
-    result.claims_robust, result.claims_side_by_side, files = write_robust_claims(
-        trials, replayed, result.claims, out, bins, fitness_tolerance
-    )
-    result.files += files
     edges = edges_no_longer_improving(trials, replayed)
     result.peaks_aggregations = peaks_under_both_aggregations(replayed, bins)
     for name, table in (
