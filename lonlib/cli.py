@@ -176,9 +176,24 @@ def _status(args: argparse.Namespace) -> None:
     if args.dry_run:
         return _dry_run_reader("status", root)
     print(status(args.dir).to_string(index=False))
+    print(_sessions_line(root))
     if args.runs:
         with pd.option_context("display.width", 250, "display.max_colwidth", 160):
             print(run_status(args.dir).to_string(index=False))
+
+
+def _sessions_line(root: Path) -> str:
+    """How many sessions sampled the experiment and the wall time they recorded."""
+    from lonlib.storage import read_manifest, session_seconds
+
+    sessions = len(read_manifest(root).get("sessions", []))
+    seconds, missing = session_seconds(root)
+    line = f"{sessions} sessions; {seconds / 3600:.2f} h of sampling wall time recorded"
+    if missing:
+        line += (
+            f" ({missing} recorded no end: killed, or sampled before lonlib recorded session ends)"
+        )
+    return line
 
 
 def _lon(args: argparse.Namespace) -> None:

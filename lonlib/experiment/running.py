@@ -45,6 +45,7 @@ from lonlib.experiment.runs import (  # noqa: F401  (re-exported: they lived her
     run_lock_path,
     run_summary,
 )
+from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.configs import (  # noqa: F401  (re-exported: configurations used to live here)
     EXECUTION_ONLY_DDPG_FIELDS,
     NAMED_CONFIGS,
@@ -57,6 +58,7 @@ from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.manifest import (
     capability_change,
     manifest_path,
+    mark_session_ended,
     sessions_with_other_result_path,
     updated_manifest,
 )
@@ -223,7 +225,8 @@ def run_experiment(
         if todo and manifest_path(out).exists():
             refuse_mixed_result_paths(out)
         remove_finished_checkpoints(out, todo, config)
-        if todo or not manifest_path(out).exists():  # a finished experiment stays untouched
+        recorded = bool(todo) or not manifest_path(out).exists()
+        if recorded:  # a finished experiment stays untouched
             write_json(manifest_path(out), manifest)
     if todo and config.ddpg.device == "cpu":
         warn_about_cpu_kernels(manifest, capability)
@@ -285,9 +288,24 @@ def run_experiment(
             execute(jobs, wait=True)
         if todo:  # a batch that ended without resuming a checkpoint of its runs left it
             remove_finished_checkpoints(out, pending_runs(config, out), config)
+    except DataWriteError:
+        recorded = False  # a session stopped by a failed write writes nothing more
+        raise
     finally:
         bar.close()
+        if recorded:
+            _record_session_end(out, manifest["sessions"][-1]["id"], time.monotonic() - started)
     return read_experiment_trials(out)
+
+
+def _record_session_end(out: Path, session_id: str, seconds: float) -> None:
+    """The session's end in the manifest (its measured wall time); a failure to write it is
+    logged, never raised: it must not hide the error that may be ending the session."""
+    try:
+        with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
+            mark_session_ended(out, session_id, seconds)
+    except (OSError, DataWriteError, LockHeld, CorruptDataError) as error:
+        log.warning("%s: could not record this session's end in the manifest: %s", out, error)
 
 
 def warn_about_cpu_kernels(manifest: dict[str, Any], capability: str) -> None:

@@ -67,6 +67,8 @@ from lonlib.storage.manifest import (
     PACKAGES,
     capability_change,
     manifest_path,
+    mark_session_ended,
+    session_seconds,
     sessions_with_other_result_path,
     updated_manifest,
 )
@@ -176,6 +178,8 @@ __all__ = [
     "save_step",
     "scan_inflight",
     "session_provenance",
+    "mark_session_ended",
+    "session_seconds",
     "sessions_with_other_result_path",
     "temporary_files",
     "trials_frame",

@@ -10,6 +10,11 @@ CPU capability) and the result-path version (:mod:`lonlib.storage.result_path`).
 :func:`sessions_with_other_result_path` lists the sessions whose numbers came from another
 result path; :func:`capability_change` says when a session computes with other torch CPU
 kernels than the sessions before it.
+
+A session that samples records its end (:func:`mark_session_ended`: ``ended`` and its wall
+``seconds``) when the call returns or raises; a killed process records none.
+:func:`session_seconds` sums them: the measured wall time of an experiment sampled across
+sessions.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import platform
 import subprocess
+import uuid
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from importlib import metadata
@@ -25,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from lonlib.storage.layout import checked_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
-from lonlib.storage.store import read_json
+from lonlib.storage.store import read_json, write_json
 
 if TYPE_CHECKING:
     from lonlib.storage.configs import ExperimentConfig
@@ -88,6 +94,7 @@ def updated_manifest(
         manifest.setdefault("sessions", []).append(
             {
                 "started": now,
+                "id": uuid.uuid4().hex,
                 "versions": _versions(),
                 "git_commit": _git_commit(),
                 # where DDPG ran this session: not configuration (results do not depend on it)
@@ -109,9 +116,38 @@ def updated_manifest(
             "git_commit": _git_commit(),
             "versions": _versions(),
             "host": platform.node(),
-            "sessions": [{"started": now, **(provenance or {})}],
+            "sessions": [{"started": now, "id": uuid.uuid4().hex, **(provenance or {})}],
         }
     return manifest
+
+
+def mark_session_ended(out: Path, session_id: str, seconds: float) -> bool:
+    """Record in ``out``'s manifest that the session ``session_id`` (its ``id``) ended now,
+    after ``seconds`` of wall time. The caller holds the manifest lock. Returns False, writing
+    nothing, when no session of the manifest has that id."""
+    path = manifest_path(out)
+    manifest = checked_manifest(read_json(path), path)
+    for session in manifest.get("sessions", []):
+        if isinstance(session, dict) and session.get("id") == session_id:
+            session["ended"] = datetime.now(UTC).isoformat(timespec="seconds")
+            session["seconds"] = round(float(seconds), 1)
+            write_json(path, manifest)
+            return True
+    return False
+
+
+def session_seconds(experiment: str | Path | Mapping[str, Any]) -> tuple[float, int]:
+    """The wall seconds the sessions of ``experiment`` (a folder or its manifest) recorded,
+    summed, and how many sessions recorded none (killed, or sampled before ends were
+    recorded)."""
+    total, missing = 0.0, 0
+    for session in _manifest(experiment).get("sessions", []):
+        seconds = session.get("seconds") if isinstance(session, dict) else None
+        if isinstance(seconds, int | float) and seconds >= 0:
+            total += float(seconds)
+        else:
+            missing += 1
+    return total, missing
 
 
 def _manifest(experiment: str | Path | Mapping[str, Any]) -> Mapping[str, Any]:
