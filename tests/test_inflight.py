@@ -815,7 +815,7 @@ def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
     import lonlib.experiment.lockstep
 
     ddpg = dataclasses.replace(CONFIG.ddpg, count_start=True, plateau_tiebreak=True)
-    config = dataclasses.replace(CONFIG, runs=3, max_local_searches=3, ddpg=ddpg)
+    config = dataclasses.replace(CONFIG, runs=3, max_local_searches=2, ddpg=ddpg)
     read = []
 
     def read_back(_path, trainer, _trials):  # what save_inflight writes, read as it is read
