@@ -1,5 +1,10 @@
 """Shared fixtures: a tiny experiment whose local searches take a fraction of a second."""
 
+import fcntl
+import os
+import pickle
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -27,15 +32,44 @@ def write_tiny_yaml(folder: Path, max_steps: int = 150) -> Path:
     return path
 
 
-@pytest.fixture(scope="session")
-def tiny_experiment(tmp_path_factory):
-    """A finished tiny experiment: (config, folder, trials)."""
+def built_once(tmp_path_factory, name: str, build: Callable[[Path], None]) -> Path:
+    """The folder ``build(folder)`` fills, built once per test session: the first of the
+    pytest-xdist workers to ask builds it (the others wait for it), later calls find it.
+    Treat it as read-only (copy it to change it): every worker reads the same folder."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's folder, above each worker's own
+    folder, done = root / f"built-once-{name}", root / f"built-once-{name}.done"
+    with open(root / f"built-once-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            shutil.rmtree(folder, ignore_errors=True)  # a build that failed part-way
+            folder.mkdir()
+            build(folder)
+            done.touch()
+    return folder
+
+
+def _run_tiny(folder: Path) -> None:
     from lonlib.experiment.running import load_config, run_experiment
 
-    folder = tmp_path_factory.mktemp("tiny")
     config = load_config(write_tiny_yaml(folder))
     trials = run_experiment(config, folder / "out", progress=False)
-    return config, folder / "out", trials
+    (folder / "trials.pickle").write_bytes(pickle.dumps(trials))
+
+
+@pytest.fixture(scope="session")
+def tiny_experiment(tmp_path_factory):
+    """A finished tiny experiment: (config, folder, trials). Run once per session (see
+    :func:`built_once`); each worker gets its own copy of the folder, and the trials that
+    run returned."""
+    from lonlib.experiment.running import load_config
+
+    shared = built_once(tmp_path_factory, "tiny", _run_tiny)
+    folder = tmp_path_factory.mktemp("tiny")
+    shutil.copytree(shared, folder, dirs_exist_ok=True)
+    trials = pickle.loads((folder / "trials.pickle").read_bytes())
+    return load_config(folder / "tiny.yaml"), folder / "out", trials
 
 
 @pytest.fixture(params=["cpu", "cpu as device"])

@@ -104,10 +104,13 @@ def test_process_pool_and_dask_give_identical_trials(reference, tmp_path, worker
 
 @pytest.fixture(scope="module")
 def longer_searches(tmp_path_factory):
-    """The tiny experiment with 300-step searches, run serially: (YAML path, trials); long
-    enough to be killed part-way."""
+    """The tiny experiment with 300-step searches, of its first p only, run serially: (YAML
+    path, trials); long enough to be killed part-way (two runs of four such searches)."""
     folder = tmp_path_factory.mktemp("longer")
     yaml_path = write_tiny_yaml(folder, max_steps=300)
+    text = yaml_path.read_text()
+    assert "perturbations: [1.0e-3, 1.0e-4]" in text
+    yaml_path.write_text(text.replace("[1.0e-3, 1.0e-4]", "[1.0e-3]"))
     return yaml_path, run_experiment(load_config(yaml_path), folder / "serial", progress=False)
 
 

@@ -413,7 +413,7 @@ def test_lockstep_workers_stop_when_their_parent_is_killed_and_the_run_resumes(r
     config = reference[0]
     out = tmp_path / "out"
     longer = dataclasses.replace(
-        config, ddpg=dataclasses.replace(config.ddpg, max_steps=1500, min_steps=1500)
+        config, ddpg=dataclasses.replace(config.ddpg, max_steps=600, min_steps=600)
     )
     path = tmp_path / "long.yaml"
     path.write_text(yaml.safe_dump(longer.to_dict()))

@@ -35,9 +35,9 @@ from lonlib.experiment.checkpoints import (
 )
 from lonlib.experiment.running import experiment_plan, run_experiment, run_status
 from lonlib.task.policy import actor_spec, critic_spec
-from tests.test_lockstep import CONFIG, SMALL, killed_after_checkpoints, serial, stored
+from tests.test_lockstep import CONFIG, SMALL, serial, small_killed, stored
 
-__all__ = ["serial"]  # the fixture, shared with tests/test_lockstep.py
+__all__ = ["serial", "small_killed"]  # the fixtures, shared with tests/test_lockstep.py
 P = 1e-3
 TAGS = [(P, 0), (P, 1), (P, 2)]
 
@@ -466,13 +466,13 @@ PLANTED_TENSORS = {
 
 @pytest.mark.parametrize("case", PLANTED_TENSORS)
 def test_planted_tensors_are_refused_by_a_resuming_experiment(
-    serial, tmp_path, monkeypatch, caplog, case
+    serial, tmp_path, small_killed, monkeypatch, caplog, case
 ):
     def plant(checkpoint):
         tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
         PLANTED_TENSORS[case](checkpoint, tensors)
 
-    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, plant)
+    log = resumed_despite(serial, tmp_path, small_killed, monkeypatch, caplog, plant)
     assert "stale in-flight checkpoint removed" in log and "refused" in log
 
 
@@ -493,11 +493,11 @@ def test_metadata_naming_another_data_file_is_not_listed(copy_of, tmp_path, capl
 
 
 def test_a_planted_checkpoint_is_refused_by_a_resuming_experiment(
-    serial, tmp_path, monkeypatch, caplog
+    serial, tmp_path, small_killed, monkeypatch, caplog
 ):
     """The whole resume path: a checkpoint of this format whose data file carries a
     callable is reported and removed; its runs continue from their stored trials."""
-    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
     marker = tmp_path / "planted-code-ran"
@@ -561,19 +561,21 @@ def test_crafted_metadata_is_refused_not_raised(copy_of, tmp_path, caplog, case)
 
 @pytest.mark.parametrize("case", ["a huge p", "a huge start time", "deep nesting"])
 def test_crafted_metadata_is_refused_by_a_resuming_experiment(
-    serial, tmp_path, monkeypatch, caplog, case
+    serial, tmp_path, small_killed, monkeypatch, caplog, case
 ):
     change, message = JSON_CASES[case]
-    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, change))
+    log = resumed_despite(
+        serial, tmp_path, small_killed, monkeypatch, caplog, lambda c: with_metadata(c, change)
+    )
     assert re.search(f"in-flight checkpoint removed .*{message}", log)
 
 
-def resumed_despite(serial, tmp_path, monkeypatch, caplog, plant) -> str:
+def resumed_despite(serial, tmp_path, small_killed, monkeypatch, caplog, plant) -> str:
     """A lockstep experiment killed mid-search, its checkpoint changed by ``plant``, then
     resumed: it is refused (no traceback) and removed, the runs continue from their stored
     trials to the uninterrupted results and nothing is created outside the experiment's
     runs. The log."""
-    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     plant(checkpoint)
     with caplog.at_level("INFO", logger="lonlib"):
@@ -658,13 +660,15 @@ PLANTED_RUNS = {
 
 @pytest.mark.parametrize("case", PLANTED_RUNS)
 def test_runs_that_are_not_the_experiments_are_refused_by_a_resuming_experiment(
-    serial, tmp_path, monkeypatch, caplog, case
+    serial, tmp_path, small_killed, monkeypatch, caplog, case
 ):
     """Nothing is locked or created for a run that is not the experiment's (no p=nan/,
     run_-003/ or run_0007/), and a slot training a run its metadata does not list is
     refused, not resumed to a KeyError."""
     plant = PLANTED_RUNS[case]
-    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, lambda c: with_metadata(c, plant))
+    log = resumed_despite(
+        serial, tmp_path, small_killed, monkeypatch, caplog, lambda c: with_metadata(c, plant)
+    )
     assert "in-flight checkpoint removed" in log and "refused" in log
 
 
@@ -794,13 +798,13 @@ def test_plain_counters_no_search_reaches_are_refused(copy_of, case):
     "case", ["negative steps", "a busy slot's episode ended", "episode steps past the limit"]
 )
 def test_counters_no_search_reaches_are_refused_by_a_resuming_experiment(
-    serial, tmp_path, monkeypatch, caplog, case
+    serial, tmp_path, small_killed, monkeypatch, caplog, case
 ):
     def plant(checkpoint):
         tensors = torch.load(checkpoint.data_path, weights_only=True)["tensors"]
         rewrite(checkpoint, tensors=COUNTER_CASES[case][0](tensors))
 
-    log = resumed_despite(serial, tmp_path, monkeypatch, caplog, plant)
+    log = resumed_despite(serial, tmp_path, small_killed, monkeypatch, caplog, plant)
     assert "stale in-flight checkpoint removed" in log and "no search reaches" in log
 
 
@@ -811,7 +815,7 @@ def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
     import lonlib.experiment.lockstep
 
     ddpg = dataclasses.replace(CONFIG.ddpg, count_start=True, plateau_tiebreak=True)
-    config = dataclasses.replace(CONFIG, runs=3, max_local_searches=3, ddpg=ddpg)
+    config = dataclasses.replace(CONFIG, runs=3, max_local_searches=2, ddpg=ddpg)
     read = []
 
     def read_back(_path, trainer, _trials):  # what save_inflight writes, read as it is read
@@ -871,11 +875,11 @@ def test_a_write_id_that_is_a_path_is_refused(copy_of, tmp_path, caplog):
 
 
 def test_a_checkpoint_named_as_a_pattern_is_ignored_by_a_resuming_experiment(
-    serial, tmp_path, monkeypatch, caplog
+    serial, tmp_path, small_killed, monkeypatch, caplog
 ):
     """A metadata file named ``*.json`` is never read, nor its name used to find the files
     of its batch: another batch's files stay; its runs continue from their stored trials."""
-    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     folder = checkpoint.metadata_path.parent
     other = folder / "0123456789ab.0123456789ab.pt"  # another batch's
@@ -917,12 +921,12 @@ def test_a_checkpoint_of_other_settings_names_those_that_differ(copy_of, case):
 
 
 def test_a_checkpoint_of_other_settings_is_kept_by_resuming_processes(
-    serial, tmp_path, monkeypatch, caplog, capfd
+    serial, tmp_path, small_killed, monkeypatch, caplog, capfd
 ):
     """Processes resuming a checkpoint split it only if it was trained with their settings:
     built with its own it would set this process's torch threads (and split a batch that
     none of them continues)."""
-    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     trainer = load_inflight(checkpoint)
     trainer.hp = dataclasses.replace(trainer.hp, threads=2)
@@ -943,11 +947,11 @@ def test_a_checkpoint_of_other_settings_is_kept_by_resuming_processes(
 
 @pytest.mark.parametrize("version", [2, 4])
 def test_a_checkpoint_of_another_format_is_refused_saying_what_to_do(
-    serial, tmp_path, monkeypatch, caplog, version
+    serial, tmp_path, small_killed, monkeypatch, caplog, version
 ):
     """Format 2 is what lonlib wrote before: a pickle of the trainer. Planted as one (its
     data file a callable), it is never read; the experiment ends as an uninterrupted one."""
-    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     marker = tmp_path / "planted-code-ran"
     payload = {"format": version, "layout": "a20ab573a108", "write_id": checkpoint.write_id}

@@ -3,6 +3,7 @@
 import copy
 import dataclasses
 import hashlib
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -12,6 +13,7 @@ from lonlib.ddpg.trainer import DDPGConfig
 from lonlib.experiment.running import ExperimentConfig, run_experiment, run_one, run_status, status
 from lonlib.storage.store import read_experiment_trials
 from lonlib.task.pendulum import PendulumConfig
+from tests.conftest import built_once
 
 # Searches stop by patience at different times, so slots are refilled while others are in
 # their warm-up or training: a run's trials must still not depend on its neighbours.
@@ -59,8 +61,23 @@ def stored(folder):
 
 @pytest.fixture(scope="module")
 def serial(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("serial")
-    run_experiment(CONFIG, folder, progress=False, executor="serial")
+    """CONFIG run by the serial executor (once per session: tests/test_inflight.py and each
+    xdist worker share it), as :func:`stored` reads it."""
+    folder = built_once(
+        tmp_path_factory,
+        "lockstep-serial",
+        lambda folder: run_experiment(CONFIG, folder, progress=False, executor="serial"),
+    )
+    return stored(folder)
+
+
+@pytest.fixture(scope="module")
+def serial_two_runs(tmp_path_factory):
+    """The serial executor's runs 0 and 1 of each p of CONFIG (a run's trials are its own:
+    the same in an experiment of fewer runs), as :func:`stored` reads them."""
+    folder = tmp_path_factory.mktemp("serial-two-runs")
+    two_runs = dataclasses.replace(CONFIG, runs=2)
+    run_experiment(two_runs, folder, progress=False, executor="serial")
     return stored(folder)
 
 
@@ -178,7 +195,9 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
 
 
 @pytest.mark.serial  # its processes' timing decides what is in flight when they yield
-def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_path, caplog, capfd):
+def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(
+    serial_two_runs, tmp_path, caplog, capfd
+):
     from lonlib.experiment.checkpoints import inflight_checkpoints
     from lonlib.experiment.lockstep_workers import run_lockstep_processes
 
@@ -202,14 +221,14 @@ def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(serial, tmp_pat
     assert sorted((s["p"], s["run"]) for s in summaries) == sorted(jobs)  # each once
     assert not inflight_checkpoints(tmp_path)
     trials, digest = stored(tmp_path)
-    want = serial[0].set_index(["p", "run"]).loc[jobs].reset_index()
+    want = serial_two_runs[0].set_index(["p", "run"]).loc[jobs].reset_index()
     trials = trials.sort_values(["p", "run", "index"], ascending=[False, True, True])
     pd.testing.assert_frame_equal(trials.reset_index(drop=True), want)
     for key, value in digest.items():
         if isinstance(value, pd.DataFrame):
-            pd.testing.assert_frame_equal(value, serial[1][key], check_exact=True)
+            pd.testing.assert_frame_equal(value, serial_two_runs[1][key], check_exact=True)
         else:
-            assert value == serial[1][key], key
+            assert value == serial_two_runs[1][key], key
 
 
 def test_a_batch_that_cannot_write_its_checkpoint_keeps_its_searches(
@@ -266,6 +285,23 @@ def killed_after_checkpoints(monkeypatch, folder, config, slots, writes):
     monkeypatch.undo()
 
 
+def _kill_small(folder):
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        killed_after_checkpoints(monkeypatch, folder, SMALL, slots=2, writes=70)
+
+
+@pytest.fixture
+def small_killed(tmp_path_factory):
+    """Copies into a folder SMALL killed after the 70th checkpoint of its batch of 2 slots
+    (:func:`killed_after_checkpoints`): that experiment is run once per session."""
+    shared = built_once(tmp_path_factory, "small-killed", _kill_small)
+
+    def copy_into(folder):
+        shutil.copytree(shared, folder, dirs_exist_ok=True)
+
+    return copy_into
+
+
 def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
     serial, tmp_path, monkeypatch, caplog, device_mode
 ):
@@ -314,13 +350,13 @@ SMALL = dataclasses.replace(CONFIG, perturbations=(1e-3,), runs=2)
 
 @pytest.mark.parametrize("change", ["trials", "ended", "start", "all", "truncated", "threads"])
 def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
-    serial, tmp_path, monkeypatch, caplog, change
+    serial, tmp_path, small_killed, monkeypatch, caplog, change
 ):
     import json
 
     from lonlib.experiment.checkpoints import inflight_checkpoints, load_inflight, save_inflight
 
-    killed_after_checkpoints(monkeypatch, tmp_path, SMALL, slots=2, writes=70)
+    small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
     if change in ("trials", "all"):  # as if runs had stored a trial after the write
         meta = json.loads(checkpoint.metadata_path.read_text())
