@@ -183,15 +183,15 @@ def _status(args: argparse.Namespace) -> None:
 
 
 def _sessions_line(root: Path) -> str:
-    """How many sessions sampled the experiment and the wall time they recorded."""
-    from lonlib.storage import read_manifest, session_seconds
+    """How many sessions sampled the experiment and the time they recorded, summed."""
+    from lonlib.storage import session_seconds
 
-    sessions = len(read_manifest(root).get("sessions", []))
-    seconds, missing = session_seconds(root)
-    line = f"{sessions} sessions; {seconds / 3600:.2f} h of sampling wall time recorded"
+    seconds, sessions, missing = session_seconds(root)
+    line = f"{sessions} sessions; {seconds / 3600:.2f} h of sampling time recorded, summed"
     if missing:
         line += (
-            f" ({missing} recorded no end: killed, or sampled before lonlib recorded session ends)"
+            f" ({missing} without an end: running, killed, stopped by a failed write, or "
+            "sampled before lonlib recorded session ends)"
         )
     return line
 

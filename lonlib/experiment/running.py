@@ -45,7 +45,6 @@ from lonlib.experiment.runs import (  # noqa: F401  (re-exported: they lived her
     run_lock_path,
     run_summary,
 )
-from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.configs import (  # noqa: F401  (re-exported: configurations used to live here)
     EXECUTION_ONLY_DDPG_FIELDS,
     NAMED_CONFIGS,
@@ -228,52 +227,53 @@ def run_experiment(
         recorded = bool(todo) or not manifest_path(out).exists()
         if recorded:  # a finished experiment stays untouched
             write_json(manifest_path(out), manifest)
-    if todo and config.ddpg.device == "cpu":
-        warn_about_cpu_kernels(manifest, capability)
-    total = len(config.perturbations) * config.runs
-    bar = progress_bar(
-        total=total,
-        initial=total - len(todo),
-        desc=f"{config.name} runs",
-        disable=not progress,
-        unit="run",
-    )
-    held: dict[tuple[float, int], str] = {}
+    bar = None
+    try:  # from here on the session records its end, however it stops
+        if todo and config.ddpg.device == "cpu":
+            warn_about_cpu_kernels(manifest, capability)
+        total = len(config.perturbations) * config.runs
+        bar = progress_bar(
+            total=total,
+            initial=total - len(todo),
+            desc=f"{config.name} runs",
+            disable=not progress,
+            unit="run",
+        )
+        held: dict[tuple[float, int], str] = {}
 
-    def on_done(summary: dict[str, Any]) -> None:
-        if summary["held_by"] is None:
-            _refresh(bar, out, done=1)
-        else:
-            held[summary["p"], summary["run"]] = summary["held_by"]
+        def on_done(summary: dict[str, Any]) -> None:
+            if summary["held_by"] is None:
+                _refresh(bar, out, done=1)
+            else:
+                held[summary["p"], summary["run"]] = summary["held_by"]
 
-    def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
-        if kind == "lockstep":
-            run_lockstep_processes(
-                out,
-                config,
+        def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
+            if kind == "lockstep":
+                run_lockstep_processes(
+                    out,
+                    config,
+                    jobs,
+                    on_done,
+                    slots,
+                    workers,
+                    wait,
+                    lambda info: _refresh(bar, out, batch=info),
+                    checkpoint_seconds=checkpoint_seconds,
+                    drain_at=drain_at,
+                )
+                return
+            execute_runs(
+                partial(run_one, out, config, wait=wait),
                 jobs,
                 on_done,
-                slots,
-                workers,
-                wait,
-                lambda info: _refresh(bar, out, batch=info),
-                checkpoint_seconds=checkpoint_seconds,
-                drain_at=drain_at,
+                workers=1 if kind == "serial" else workers,
+                scheduler=scheduler if kind == "dask" else None,
+                max_attempts=max_attempts,
+                key_prefix=config.name,
+                on_tick=lambda: _refresh(bar, out),
+                worker_check=partial(check_worker_sees_folder, str(out)),
             )
-            return
-        execute_runs(
-            partial(run_one, out, config, wait=wait),
-            jobs,
-            on_done,
-            workers=1 if kind == "serial" else workers,
-            scheduler=scheduler if kind == "dask" else None,
-            max_attempts=max_attempts,
-            key_prefix=config.name,
-            on_tick=lambda: _refresh(bar, out),
-            worker_check=partial(check_worker_sees_folder, str(out)),
-        )
 
-    try:
         if todo:
             execute(todo, wait=False)
         if held and draining(drain_at):  # waiting for them would start searches
@@ -292,19 +292,37 @@ def run_experiment(
         recorded = False  # a session stopped by a failed write writes nothing more
         raise
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
         if recorded:
             _record_session_end(out, manifest["sessions"][-1]["id"], time.monotonic() - started)
     return read_experiment_trials(out)
 
 
+SESSION_END_LOCK_SECONDS = 30.0
+"""How long a session waits for the manifest lock to record its end before it gives up
+(logged): another session starting on the folder holds it while it reads every stored run."""
+
+
 def _record_session_end(out: Path, session_id: str, seconds: float) -> None:
-    """The session's end in the manifest (its measured wall time); a failure to write it is
-    logged, never raised: it must not hide the error that may be ending the session."""
+    """The session's end in the manifest (its measured wall time). Best effort: a folder or
+    manifest that is gone is left gone, and any failure to write the end (the lock held past
+    :data:`SESSION_END_LOCK_SECONDS`, a disk error, a manifest edited into another shape) is
+    logged, never raised, so it cannot hide the error that may be ending the session."""
+    if not manifest_path(out).is_file():
+        return
+    deadline = time.monotonic() + SESSION_END_LOCK_SECONDS
     try:
-        with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
-            mark_session_ended(out, session_id, seconds)
-    except (OSError, DataWriteError, LockHeld, CorruptDataError) as error:
+        while True:
+            try:
+                with exclusive_lock(out / MANIFEST_LOCK, wait=False, record_holder=False):
+                    mark_session_ended(out, session_id, seconds)
+                return
+            except LockHeld:
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(0.2)
+    except Exception as error:  # noqa: BLE001  (logged: see the docstring)
         log.warning("%s: could not record this session's end in the manifest: %s", out, error)
 
 

@@ -13,13 +13,14 @@ kernels than the sessions before it.
 
 A session that samples records its end (:func:`mark_session_ended`: ``ended`` and its wall
 ``seconds``) when the call returns or raises; a killed process records none.
-:func:`session_seconds` sums them: the measured wall time of an experiment sampled across
-sessions.
+:func:`session_seconds` sums them: the measured time of an experiment sampled across
+sessions (sessions that ran at the same time each count).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import platform
 import subprocess
 import uuid
@@ -124,10 +125,11 @@ def updated_manifest(
 def mark_session_ended(out: Path, session_id: str, seconds: float) -> bool:
     """Record in ``out``'s manifest that the session ``session_id`` (its ``id``) ended now,
     after ``seconds`` of wall time. The caller holds the manifest lock. Returns False, writing
-    nothing, when no session of the manifest has that id."""
+    nothing, when no session of the manifest has that id (or its sessions are not a list)."""
     path = manifest_path(out)
     manifest = checked_manifest(read_json(path), path)
-    for session in manifest.get("sessions", []):
+    sessions = manifest.get("sessions")
+    for session in sessions if isinstance(sessions, list) else []:
         if isinstance(session, dict) and session.get("id") == session_id:
             session["ended"] = datetime.now(UTC).isoformat(timespec="seconds")
             session["seconds"] = round(float(seconds), 1)
@@ -136,18 +138,29 @@ def mark_session_ended(out: Path, session_id: str, seconds: float) -> bool:
     return False
 
 
-def session_seconds(experiment: str | Path | Mapping[str, Any]) -> tuple[float, int]:
-    """The wall seconds the sessions of ``experiment`` (a folder or its manifest) recorded,
-    summed, and how many sessions recorded none (killed, or sampled before ends were
-    recorded)."""
-    total, missing = 0.0, 0
-    for session in _manifest(experiment).get("sessions", []):
-        seconds = session.get("seconds") if isinstance(session, dict) else None
-        if isinstance(seconds, int | float) and seconds >= 0:
-            total += float(seconds)
-        else:
-            missing += 1
-    return total, missing
+def _recorded_seconds(session: object) -> float | None:
+    """A session's recorded wall seconds: a finite number >= 0 (not a bool), else None."""
+    seconds = session.get("seconds") if isinstance(session, dict) else None
+    if isinstance(seconds, bool) or not isinstance(seconds, int | float):
+        return None
+    try:
+        value = float(seconds)
+    except OverflowError:  # an int too large for a float
+        return None
+    return value if math.isfinite(value) and value >= 0 else None
+
+
+def session_seconds(experiment: str | Path | Mapping[str, Any]) -> tuple[float, int, int]:
+    """The sessions of ``experiment`` (a folder or its manifest): the wall seconds they
+    recorded, summed (sessions that ran at the same time each count), how many sessions
+    there are, and how many of them recorded no end (running, killed, stopped by a failed
+    write, or sampled before lonlib recorded ends). Sessions that are not a list count as
+    none."""
+    sessions = _manifest(experiment).get("sessions")
+    sessions = sessions if isinstance(sessions, list) else []
+    recorded = [_recorded_seconds(session) for session in sessions]
+    total = sum(seconds for seconds in recorded if seconds is not None)
+    return total, len(sessions), sum(seconds is None for seconds in recorded)
 
 
 def _manifest(experiment: str | Path | Mapping[str, Any]) -> Mapping[str, Any]:
