@@ -237,14 +237,14 @@ def k_growth_rows(device: str, marks: tuple[int, ...], batch: int = 256) -> list
 
 
 def greedy_rows(count: int = 256) -> list[dict]:
-    """Host-side greedy rollouts of stored optima (data/reference-v2, a mix of behaviours):
+    """Host-side greedy rollouts of stored optima (data/reference, a mix of behaviours):
     seconds per policy in one batched rollout of ``count``, and alone."""
     from lonlib.ddpg.trainer import DDPGConfig as Config
     from lonlib.ddpg.trainer import greedy_scores
 
-    files = sorted(Path("data/reference-v2").glob("p=*/run_*/optimum_*.npz"))
+    files = sorted(Path("data/reference").glob("p=*/run_*/optimum_*.npz"))
     if not files:
-        return [{"error": "no stored optima under data/reference-v2"}]
+        return [{"error": "no stored optima under data/reference"}]
     thetas = np.stack([np.load(f)["theta"] for f in files])
     thetas = thetas[np.arange(count) % len(thetas)]
     scoring = Config().scoring

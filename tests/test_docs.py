@@ -55,7 +55,7 @@ def test_the_readme_fits_a_screen_and_its_first_screen_holds_the_essentials():
         "@inproceedings{zhou2024lonrl",  # BibTeX
         "## Licence",
         "LICENSE",
-        "data/reference-v2/",
+        "data/reference/",
     ]:
         assert needed in first, needed
     # ... with their measured times

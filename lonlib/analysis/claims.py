@@ -143,7 +143,7 @@ BEHAVIOUR_NODE_FEATURES = (
     "cart_speed",
     "end_share",
 )
-"""Claim d in behaviour space (pre-registered 2026-11-25, before data/reference-v2 stored a
+"""Claim d in behaviour space (pre-registered 2026-11-25, before today's data/reference stored a
 run): a node is a class of optima whose standardised behaviour descriptors (these ``b_*``
 columns of a two-cart trial, ``end_share`` = end step / nominal steps, each column z-scored
 over the p's optima) lie within :data:`BEHAVIOUR_NODE_EPSILON` (Euclidean) and whose

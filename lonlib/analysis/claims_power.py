@@ -75,12 +75,15 @@ from lonlib.analysis.claims import (
     clopper_pearson,
 )
 
-ENV_STEPS_PER_RUN = 9.2e6 / 12
-"""Env steps per run, measured on ``data/reference``: 9.2M env steps in 2 x 6 runs
-(~0.77M: about 10 local searches of ~74k steps)."""
-AGENT_STEPS_PER_CORE_SECOND = 145.0
-"""The paper's DDPG (batch 2000) on this machine, measured on ``data/reference``: 9.2M env
-steps in 8 h 50 min on 2 cores (analyses and tests shared the cores)."""
+ENV_STEPS_PER_RUN = 15_358_854 / 20
+"""Env steps per run, measured on ``data/reference``: 15.36M env steps in 2 x 10 runs
+(~0.77M: about 10 local searches of ~76k steps)."""
+AGENT_STEPS_PER_CORE_SECOND = 178.0
+"""The paper's DDPG (batch 2000) on one core of this machine, measured on ``data/reference``:
+15.36M env steps in at most 24 h of one core (the time from each recorded session start to
+the next, its sessions' ends not recorded then), so a lower bound on the rate and the costs
+built on it upper bounds. The first reference ran at 145 per core (9.2M env steps in 8 h 50
+min on 2 cores shared with analyses and tests)."""
 THIS_MACHINE_CORES = 2
 CLUSTER_CORES = 64
 """The Dask cluster of the cost column: the same per-core rate on this many cores."""
@@ -93,14 +96,14 @@ GPU_MAX_SLOTS = 256
 P_VALUES = 2
 """The experiment runs both p values (claim c compares them), so its cost is twice the
 runs per p."""
-OPTIMA_PER_RUN = 20 / 6
+OPTIMA_PER_RUN = 32 / 10
 """Accepted optima (the LON's nodes) per run, measured on ``data/reference`` at p = 1e-4:
-20 in 6 runs. Converts claim d's behaviour nodes (at most one per optimum) and claim e's
+32 in 10 runs. Converts claim d's behaviour nodes (at most one per optimum) and claim e's
 optima in 0.5-0.8 into runs."""
 GAP_REGION_SHARE = 0.4
 """Assumed share of the optima that lie in 0.5-0.8: the paper's landscape, its optima
 spread evenly over its five peaks, two of which (0.55, 0.72) lie there. The reference has
-none there (0 of 20)."""
+none there (0 of 32)."""
 POWER_SIMULATIONS = 4000
 """Simulated experiments per n for claims a and b."""
 POWER_SEED = 0

@@ -342,12 +342,11 @@ QUICK_DDPG = DDPGConfig(
 )
 
 
-# Per p, of the committed data/reference (2 x 6 runs, 9.2M env steps, 8 h 50 on 2 cores:
-# ~145 agent-steps/s per core). Its successor, configs/reference-v2.yaml (2 x 10 runs, at
-# least 10 sinks per p so that claims a and b can be computed; ~15M env steps, ~29
-# core-hours on one core), is sampled into data/reference-v2/ and replaces it when finished
-# and verified; this becomes 10 then.
-REFERENCE_RUNS = 6
+# Per p, of the committed data/reference: 2 x 10 runs, so that each p has at least 10 sinks
+# and claims a and b can be computed (sampled with the one rollout, result-path version 2,
+# on one core across sessions; docs/results.md has its measured cost). The first reference
+# (2 x 6 runs, sampled before the one rollout) is in git history.
+REFERENCE_RUNS = 10
 
 
 # The paper's other problem (issue: "The top of the landscape"). Batch 256, not 2000: the

@@ -15,8 +15,8 @@ messages) keep the version.
 
 History:
 
-* "1" (2026-11-25): the first recorded version (the code that sampled ``data/reference``,
-  whose sessions predate the stamp and record none).
+* "1" (2026-11-25): the first recorded version (the code that sampled the first
+  ``data/reference``, 2 x 6 runs, whose sessions predate the stamp and record none).
 * "2" (2026-11-25): the one rollout (:mod:`lonlib.task.rollout`): defined float64 arithmetic for
   the greedy Actor and ``sin``/``cos``/``exp`` from IEEE basic operations in the physics
   (:mod:`lonlib.util.portable_math`); trials record both aggregations and the conditioning;
