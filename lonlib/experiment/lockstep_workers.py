@@ -20,6 +20,8 @@ import concurrent.futures as cf
 import logging
 import multiprocessing
 import os
+import threading
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -246,6 +248,28 @@ def split_jobs(
     return groups
 
 
+ORPHAN_CHECK_SECONDS = 1.0
+"""How often a lockstep worker process checks that the process that started it is alive."""
+ORPHAN_WATCH_THREAD = "lonlib-orphan-watch"
+
+
+def _exit_when_orphaned(parent: int) -> None:
+    """Watch, from a daemon thread, that ``parent`` still is this process's parent, and exit
+    at once when it is not. A thread, not a check between batch steps: a search's final
+    judging can run for minutes without a step."""
+
+    if any(thread.name == ORPHAN_WATCH_THREAD for thread in threading.enumerate()):
+        return  # a pool process runs several groups: one watcher is enough
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(ORPHAN_CHECK_SECONDS)
+        print(f"lockstep worker {os.getpid()}: parent {parent} died; exiting", flush=True)
+        os._exit(1)  # the kernel releases the run locks; stored files are written atomically
+
+    threading.Thread(target=watch, name=ORPHAN_WATCH_THREAD, daemon=True).start()
+
+
 def _lockstep_group(
     out: str,
     config: Any,
@@ -264,11 +288,9 @@ def _lockstep_group(
     checkpoint) when the process that started it has died."""
 
     def on_tick(info: dict[str, Any]) -> None:
-        if os.getppid() != parent:  # the pool machinery would swallow an exception
-            print(f"lockstep worker {os.getpid()}: parent {parent} died; exiting", flush=True)
-            os._exit(1)  # the kernel releases the run locks; stored trials are complete
         _loads[index] = info["in_flight"] + info["pending"]
 
+    _exit_when_orphaned(parent)
     show_lonlib_messages()  # a spawned process: its messages would be lost otherwise
     summaries: list[dict[str, Any]] = []
     run_lockstep(
