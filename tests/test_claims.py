@@ -64,8 +64,10 @@ def write_experiment(folder: Path, runs, labels="run", descriptors=None):
     fitness levels after a start at a fitness unique to the run, then two rejected trials.
     ``labels``: ``"run"`` (a behaviour label unique to each run), ``"level"`` (one label per
     fitness level, shared across runs) or None (no label). ``descriptors``: None (no
-    behaviour columns), ``"scattered"`` (every optimum its own behaviour) or ``"level"``
-    (one behaviour per fitness level, shared across runs). Files are written atomically as
+    behaviour columns), ``"scattered"`` (every optimum its own behaviour), ``"sparse"``
+    (every optimum its own behaviour but the runs' starts, which share one: nodes merge,
+    none is entered twice) or ``"level"`` (one behaviour per fitness level, shared across
+    runs). Files are written atomically as
     in an experiment, without flushing them to disk (a test's speed)."""
     with mock.patch.object(os, "fsync"):
         return _write_experiment(folder, runs, labels, descriptors)
@@ -83,7 +85,11 @@ def _write_experiment(folder: Path, runs, labels, descriptors):
                 accepted = fitness >= best
                 label = {"run": f"run {run}", "level": f"level {fitness:.2f}", None: None}[labels]
                 behaviour = {} if label is None else {"label": label}
-                key = {"scattered": 1000 * run + index, "level": round(fitness * 1e4)}
+                key = {
+                    "scattered": 1000 * run + index,
+                    "level": round(fitness * 1e4),
+                    "sparse": 999_999 if index == 0 else 1000 * run + index,
+                }
                 if descriptors:
                     behaviour |= descriptor(key[descriptors])
                 trials.append(
@@ -104,7 +110,7 @@ def paper_like(tmp_path_factory):
     return write_experiment(
         tmp_path_factory.mktemp("paper") / "exp",
         {1e-3: WORSE, 1e-4: PAPER_LIKE},
-        descriptors="scattered",
+        descriptors="sparse",
     )
 
 
@@ -121,12 +127,24 @@ def test_a_paper_like_experiment_reproduces_every_claim(paper_like):
     assert row.loc["b", "ci_low"] == pytest.approx(low / (1 - low)) and low > 0.5
     assert row.loc["c", "p_value"] < 0.01 and row.loc["c", "ci_low"] > 0
     assert row.loc["c", "effect"] == pytest.approx(480 / 1440)  # Cliff's delta by hand
-    assert row.loc["d", "effect"] == 0.0 and row.loc["d", "n"] == 100  # 48 starts + 52
+    assert row.loc["d", "effect"] == 0.0 and row.loc["d", "n"] == 53  # the starts' node + 52
     assert row.loc["e", "statistic"] == 0 and row.loc["e", "n"] == 12
     assert row.loc["e", "p_value"] == pytest.approx((2 / 3) ** 12)
     assert row.loc["e", "ci_high"] < 1 and row.loc["e", "threshold"] == 1
     assert "Mann-Whitney" in row.loc["c", "evidence"] and "CI [" in row.loc["c", "evidence"]
     assert list(row["direction"]) == [">= 3", "> 1", "> 0", "<= 0.05", "< 1"]
+
+
+def test_claim_d_is_not_reproduced_by_a_test_that_cannot_fail(tmp_path):
+    """With every optimum a node of its own, no node can have two in-edges: the share is 0
+    whatever the landscape, so the verdict is inconclusive, not reproduced."""
+    alone = write_experiment(tmp_path / "alone", {1e-4: PAPER_LIKE}, None, "scattered")
+    row = paper_claims(alone).set_index("claim").loc["d"]
+    assert (row["n"], row["statistic"], row["effect"]) == (100, 0, 0.0)
+    assert row["verdict"] == INCONCLUSIVE and "the test cannot fail" in row["evidence"]
+    merged = write_experiment(tmp_path / "merged", {1e-4: PAPER_LIKE}, None, "sparse")
+    row = paper_claims(merged).set_index("claim").loc["d"]
+    assert row["verdict"] == REPRODUCED and "cannot fail" not in row["evidence"]
 
 
 def test_a_flat_quick_sized_experiment_is_not_testable(tmp_path):

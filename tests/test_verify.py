@@ -3,6 +3,7 @@
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,6 +21,29 @@ def test_a_fresh_experiment_replays_every_stored_number(tiny_experiment, capsys)
     assert report.trials == report.replayed == report.starts == len(trials)
     cli_main(["verify", str(out)])
     assert "verify: OK" in capsys.readouterr().out
+
+
+REFERENCE = Path(__file__).resolve().parents[1] / "data" / "reference"
+REFERENCE_RUN = "p=0.0001/run_0007"
+"""A run of the committed reference (8 searches, the recording of its best *stops at
+boundary* optimum): small enough to replay in a test."""
+
+
+def test_a_run_of_the_committed_reference_replays_every_stored_number(tmp_path):
+    """Real stored data through the public path: every fitness (both aggregations), robust
+    estimate, descriptor and label of the run, every rebuilt start and the recording come
+    back exactly from the stored Actors, under the current result-path version."""
+    copy = tmp_path / "reference"
+    shutil.copytree(REFERENCE / REFERENCE_RUN, copy / REFERENCE_RUN)
+    shutil.copy(REFERENCE / "manifest.json", copy / "manifest.json")
+    (copy / "recordings").mkdir()
+    for recording in (REFERENCE / "recordings").glob("*_p=0.0001_run=7_*.rrd"):
+        shutil.copy(recording, copy / "recordings" / recording.name)
+    report = verify_experiment(copy)
+    errors = [finding for finding in report.findings if finding.severity == "error"]
+    assert report.current_version and errors == [], errors
+    assert report.trials == report.replayed == report.starts == 8
+    assert report.recordings == 1
 
 
 @pytest.fixture

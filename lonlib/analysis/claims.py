@@ -543,7 +543,10 @@ def claim_sparse(land: Landscape) -> Claim:
     :data:`BEHAVIOUR_NODE_FEATURES`, :data:`BEHAVIOUR_NODE_EPSILON` and
     :data:`BEHAVIOUR_NODE_FITNESS_TOLERANCE`): the share of behaviour nodes entered by
     edges from more than one other node. Reproduced when it is at most
-    :data:`SPARSE_MAX_SHARE` on at least :data:`MIN_SPARSE_NODES` nodes; contradicted when
+    :data:`SPARSE_MAX_SHARE` on at least :data:`MIN_SPARSE_NODES` nodes of which one at
+    least holds two optima or more (with every optimum a node of its own, each node has one
+    parent at most and the test could not fail: the same defect as the parameter-level LON;
+    this condition was added after the reference's first analysis showed it); contradicted when
     the one-sided exact binomial test of "share > SPARSE_MAX_SHARE" (nodes as trials) gives
     p < ALPHA, i.e. the Clopper-Pearson interval's lower end exceeds it; else inconclusive.
     Not testable without behaviour descriptors. In the parameter-level LON every optimum
@@ -580,7 +583,14 @@ def claim_sparse(land: Landscape) -> Claim:
         f"{SPARSE_MAX_SHARE:.0%}: p = {p_value:.3g}; sparse means <= {SPARSE_MAX_SHARE:.0%} "
         f"(on >= {MIN_SPARSE_NODES} nodes); {_label_level(land)}"
     )
-    reproduced = share <= SPARSE_MAX_SHARE and nodes >= MIN_SPARSE_NODES
+    merged = nodes < result.optima
+    if not merged:
+        evidence += (
+            "; no two optima share a node at this epsilon, so no node can be entered from two "
+            "others and the test cannot fail: inconclusive until nodes merge (more optima, "
+            "or a coarser epsilon: claim d's curve)"
+        )
+    reproduced = share <= SPARSE_MAX_SHARE and nodes >= MIN_SPARSE_NODES and merged
     return Claim(
         **base,
         n=nodes,

@@ -80,10 +80,12 @@ ENV_STEPS_PER_RUN = 15_358_854 / 20
 (~0.77M: about 10 local searches of ~76k steps)."""
 AGENT_STEPS_PER_CORE_SECOND = 178.0
 """The paper's DDPG (batch 2000) on one core of this machine, measured on ``data/reference``:
-15.36M env steps in at most 24 h of one core (the time from each recorded session start to
-the next, its sessions' ends not recorded then), so a lower bound on the rate and the costs
-built on it upper bounds. The first reference ran at 145 per core (9.2M env steps in 8 h 50
-min on 2 cores shared with analyses and tests)."""
+15.36M env steps in at most 24 h of one core. Its sessions' ends were not recorded then, so
+the time is bounded from above: each session start to the next when they lie less than 3 h
+apart (a working session's length), the last session's 67 min from its log, and 3 h for the
+one session whose next start came two days later. So this is a lower bound on the rate and
+the costs built on it are upper bounds. The first reference ran at 145 per core (9.2M env
+steps in 8 h 50 min on 2 cores shared with analyses and tests)."""
 THIS_MACHINE_CORES = 2
 CLUSTER_CORES = 64
 """The Dask cluster of the cost column: the same per-core rate on this many cores."""
