@@ -107,16 +107,10 @@ def test_the_reference_experiment_replays_bit_for_bit_under_the_pinned_kernels()
     from lonlib.ddpg import local_search
     from lonlib.experiment import initial_parameters
 
-    current = [
-        out
-        for out in [REPO / "data" / "reference"]
-        if (out / "p=0.001" / "run_0000" / "history_0000.parquet").exists()
-        and {s.get("result_path_version") for s in read_json(manifest_path(out))["sessions"]}
-        == {RESULT_PATH_VERSION}
-    ]
-    if not current:
+    out = REPO / "data" / "reference"
+    first = out / "p=0.001" / "run_0000" / "history_0000.parquet"
+    if not first.exists() or sessions_with_other_result_path(out):
         pytest.skip(f"no committed reference sampled by result-path version {RESULT_PATH_VERSION}")
-    out = current[0]
     config = ExperimentConfig.from_mapping(read_json(manifest_path(out))["config"])
     hp = dataclasses.replace(config.ddpg, max_steps=2500, min_steps=0)
     p, run = 1e-3, 0
