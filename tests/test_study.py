@@ -126,6 +126,33 @@ def test_an_exploring_cell_scores_its_optima_from_the_fixed_start():
         assert judged == search["history_fitness_all"]
 
 
+# ----------------------------------------------------------------------- upright start
+def test_an_upright_start_cell_trains_and_scores_from_upright_and_keeps_old_cells_names():
+    upright = dataclasses.replace(BASE, initial_angle=0.0)
+    assert upright.name == BASE.name + "_upright-start"
+    assert dataclasses.replace(BASE, initial_angle=1.0).name == BASE.name + "_start1"
+    # a hanging cell is stored as before the setting existed; an upright one names it
+    assert "initial_angle" not in BASE.to_dict() and upright.to_dict()["initial_angle"] == 0.0
+    config = tiny_study(BASE, upright)
+    record, (thetas, _) = study.run_cell(upright, config)
+    env = upright.env(config.env)
+    assert env.initial_angle == 0.0 and record["cell"]["initial_angle"] == 0.0
+    fitness, _ = greedy_scores(thetas, env, config.hp.scoring)
+    hanging, _ = greedy_scores(thetas, BASE.env(config.env), config.hp.scoring)
+    for search, f, h in zip(record["searches"], fitness, hanging, strict=True):
+        assert search["returned_fitness"] == f == search["rollout_fitness"] != h
+    rng = np.random.default_rng(0)
+    actors, critics = actor_spec(1).initial(rng)[None], critic_spec(1).initial(rng)[None]
+    started = SlotTrainer(actors, critics, [1], env, config.hp)
+    assert (started.sim.phi == 0.0).all()  # every training episode starts upright
+
+
+@pytest.mark.parametrize("angle", [-0.1, 2 * math.pi, float("nan")])
+def test_a_start_angle_out_of_range_is_refused_by_name(angle):
+    with pytest.raises(ValueError, match="initial_angle must be"):
+        dataclasses.replace(BASE, initial_angle=angle)
+
+
 # ------------------------------------------------------------------- continue from best
 def test_continue_from_a_cell_missing_from_the_grid_is_refused_before_compute():
     with pytest.raises(ValueError, match=r"cells\[0\]\.continue_from.*earlier cell"):
@@ -463,11 +490,14 @@ def test_the_two_cart_study_grid_reads_and_its_report_writes(tmp_path):
     assert config.env.n_carts == 2 and config.env == CalibrationConfig().env
     default = config.cells[0]
     assert default == Cell()  # the default cell: what the others are compared against
-    kinds = {(c.reward, c.exploring_starts, c.continue_from) for c in config.cells[1:]}
+    kinds = {
+        (c.reward, c.exploring_starts, c.continue_from, c.initial_angle) for c in config.cells[1:]
+    }
     assert kinds == {
-        ("height", True, ""),
-        ("height-product", False, ""),
-        ("height", False, default.name),
+        ("height", True, "", math.pi),
+        ("height-product", False, "", math.pi),
+        ("height", False, default.name, math.pi),
+        ("height", False, "", 0.0),  # the balance-only cell
     }
     assert config.starts == StartSpread()  # the documented default distribution
     assert config.ddpg.judge_every == 2000 == config.env.steps  # docs/study-two-cart.md

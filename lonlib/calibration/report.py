@@ -10,6 +10,7 @@ stored and writes ``calibration.csv`` (one row per cell, :func:`cell_table`),
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,7 +40,8 @@ def search_table(records: list[dict[str, Any]]) -> pd.DataFrame:
     rows = []
     for record in records:
         for search in record["searches"]:
-            row = {"cell": record["name"], **record["cell"]}
+            # cells stored before the start angle was a cell setting start hanging
+            row = {"cell": record["name"], "initial_angle": math.pi, **record["cell"]}
             # only the velocity motor has a time constant, only the others a gain
             row["motor_gain" if row["motor"] == "velocity" else "motor_tau"] = np.nan
             if "continue_from" in row:  # empty (none) reads back from a CSV as NaN
@@ -66,6 +68,7 @@ STUDY_COLUMNS = [
     "reward",
     "exploring_starts",
     "continue_from",
+    "initial_angle",
     "searches",
     *(
         f"{column}_{a}"
@@ -105,6 +108,7 @@ def study_table(searches: pd.DataFrame) -> pd.DataFrame:
             "continue_from": first.get("continue_from", "")
             if pd.notna(first.get("continue_from", ""))
             else "",
+            "initial_angle": float(first.get("initial_angle", math.pi)),
             "searches": len(group),
         }
         for a in AGGREGATIONS:
@@ -143,6 +147,12 @@ def study_markdown(table: pd.DataFrame) -> str:
     lines = [head, rule]
     for _, row in table.iterrows():
         start = f"best of {row['continue_from']}" if row["continue_from"] else "initial"
+        if row["initial_angle"] != math.pi:
+            start += (
+                ", upright"
+                if row["initial_angle"] == 0.0
+                else f", rods at {row['initial_angle']:.3g}"
+            )
         line = (
             f"| {row['cell']} | {row['reward']} "
             f"| {'exploring' if row['exploring_starts'] else 'fixed'} | {start} |"
@@ -315,7 +325,7 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
             else f"{row['motor']} × {row['motor_gain']:g}"
         )
         end = "survives" if row["best_end_reason"] == "step_limit" else row["best_end_reason"]
-        kinds = [k for k in ("explore", "continue") if f"_{k}" in str(row["cell"])]
+        kinds = [k for k in ("upright-start", "explore", "continue") if f"_{k}" in str(row["cell"])]
         reward = row["reward"] + (f" ({', '.join(kinds)})" if kinds else "")
         lines.append(
             f"| {motor} | {row['integrator']} | {reward} "

@@ -174,9 +174,16 @@ class Cell:
     continue_from: str = ""
     """Name of an earlier cell of the grid whose searches' best Actors and Critics this
     cell's searches start from (name suffix ``_continue``); empty: the study's starts."""
+    initial_angle: float = math.pi
+    """Rod angle [rad] at the start of every episode, training and greedy (hence the
+    fitness), in [0, 2 pi): pi, hanging (Algorithm 1's start); 0, upright, a balance-only
+    task that separates holding the rods up from swinging them up (name suffix
+    ``_upright-start``; another angle ``_start<angle>``)."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
+        if not 0.0 <= self.initial_angle < 2 * math.pi:
+            raise ValueError(f"initial_angle must be in [0, 2 pi), got {self.initial_angle!r}")
         check_choice("motor", self.motor, MOTORS)
         check_choice("integrator", self.integrator, INTEGRATORS)
         check_choice("reward", self.reward, REWARDS)
@@ -186,14 +193,30 @@ class Cell:
     @property
     def name(self) -> str:
         """File-safe, readable name, e.g. ``velocity-tau0.02_semi-implicit_height``
-        (``_explore``, ``_continue`` appended for those kinds)."""
+        (``_upright-start``, ``_explore``, ``_continue`` appended for those kinds)."""
         motor = (
             f"velocity-tau{self.motor_tau:g}"
             if self.motor == "velocity"
             else f"{self.motor}-gain{self.motor_gain:g}"
         )
         kinds = "_explore" * self.exploring_starts + "_continue" * bool(self.continue_from)
-        return f"{motor}_{self.integrator}_{self.reward}{kinds}"
+        return f"{motor}_{self.integrator}_{self.reward}{self.start_suffix}{kinds}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The cell's fields as stored: ``initial_angle`` only when it is not hanging, so
+        that cells stored before it was a setting keep their identity."""
+        out = dataclasses.asdict(self)
+        if self.initial_angle == math.pi:
+            out.pop("initial_angle")
+        return out
+
+    @property
+    def start_suffix(self) -> str:
+        """The name's mark of a start other than hanging: ``_upright-start`` or
+        ``_start<angle>``; empty for Algorithm 1's hanging start."""
+        if self.initial_angle == math.pi:
+            return ""
+        return "_upright-start" if self.initial_angle == 0.0 else f"_start{self.initial_angle:.3g}"
 
     def env(self, base: PendulumConfig) -> PendulumConfig:
         """``base`` with this cell's physics (validated by :class:`PendulumConfig`)."""
@@ -204,6 +227,7 @@ class Cell:
             motor_gain=1.0 if self.motor == "velocity" else self.motor_gain,
             motor_tau=self.motor_tau,
             reward=self.reward,
+            initial_angle=self.initial_angle,
         )
 
 
@@ -309,7 +333,7 @@ class CalibrationConfig:
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (YAML/JSON friendly) that :meth:`from_mapping` reads back."""
         out = dataclasses.asdict(self)
-        out["cells"] = [dataclasses.asdict(cell) for cell in self.cells]
+        out["cells"] = [cell.to_dict() for cell in self.cells]
         return out
 
     def cell(self, name: str) -> Cell:
@@ -325,7 +349,7 @@ class CalibrationConfig:
             out["starts"] = dataclasses.asdict(self.starts)
         if cell.continue_from:
             source = self.cell(cell.continue_from)
-            out["source"] = {"cell": dataclasses.asdict(source), **self.cell_settings(source)}
+            out["source"] = {"cell": source.to_dict(), **self.cell_settings(source)}
         return out
 
     def settings(self) -> dict[str, Any]:
@@ -650,7 +674,7 @@ def run_cell(
     start = time.perf_counter()
     env = cell.env(config.env)
     hp = config.hp
-    settings = {"cell": dataclasses.asdict(cell), **config.cell_settings(cell)}
+    settings = {"cell": cell.to_dict(), **config.cell_settings(cell)}
     log = JudgedLog(env, config.seeds)
     checkpoint = CellCheckpoint(out, cell.name) if out is not None else None
     restored = checkpoint.load(settings) if checkpoint else None
@@ -723,7 +747,7 @@ def run_cell(
             }
         )
     record = {
-        "cell": dataclasses.asdict(cell),
+        "cell": cell.to_dict(),
         "name": cell.name,
         "settings": config.cell_settings(cell),
         "labels": list(LABELS),
