@@ -292,6 +292,13 @@ def _verify(args: argparse.Namespace) -> None:
     return None
 
 
+def _thin(args: argparse.Namespace) -> None:
+    from lonlib.storage.thin import thin_histories
+
+    report = thin_histories(experiment_folder(args.dir), dry_run=args.dry_run)
+    print(("would thin " if args.dry_run else "thinned ") + report.summary())
+
+
 def _calibrate(args: argparse.Namespace) -> None:
     from lonlib.calibration import load_calibration, run_calibration, with_overrides
     from lonlib.calibration.report import calibration_block, readme_markers, write_outputs
@@ -451,6 +458,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     verify.add_argument("--all", action="store_true", help="print every finding")
     verify.set_defaults(func=_verify)
+
+    thin = sub.add_parser(
+        "thin",
+        help="keep only the judged rows of every training history (before committing a folder)",
+    )
+    thin.add_argument("dir", help="experiment folder, e.g. data/one-cart")
+    thin.set_defaults(func=_thin)
 
     calibrate = sub.add_parser(
         "calibrate", help="run (or resume) the physics calibration study into OUT"

@@ -14,7 +14,7 @@ from lonlib.cli import build_parser, main
 from lonlib.experiment.running import load_config, run_experiment
 from lonlib.storage.store import DataWriteError
 
-READERS = ["status", "lon", "analyse", "record", "verify"]
+READERS = ["status", "lon", "analyse", "record", "verify", "thin"]
 # What reStructuredText or Sphinx markup looks like in a help text.
 DEPRECATED = "lonlib: --tolerance is deprecated, use --fitness-tolerance"
 MARKUP = re.compile(r"``|:(func|class|mod|data|meth):`")

@@ -132,6 +132,20 @@ def test_the_generated_tables_equal_what_the_code_generates_from_the_committed_d
     assert ROBUST_BEGIN in page
 
 
+def test_a_page_names_its_own_command_in_the_begin_marker_and_keeps_it():
+    from lonlib.util.readme_tables import splice
+
+    begin = "<!-- summary:begin (lonlib analyse data/reference --docs docs/results.md) -->"
+    own = "<!-- summary:begin (lonlib analyse data/one-cart --docs docs/one-cart.md) -->"
+    page = f"head\n{own}\nold\n<!-- summary:end -->\ntail\n"
+    pasted = splice(page, begin, "<!-- summary:end -->", "new table")
+    assert pasted == f"head\n{own}\nnew table\n<!-- summary:end -->\ntail\n"
+    with pytest.raises(ValueError, match="once each"):
+        splice(page + own, begin, "<!-- summary:end -->", "x")
+    with pytest.raises(ValueError, match="complete comment"):
+        splice("<!-- summary:begin (x <!-- summary:end -->", begin, "<!-- summary:end -->", "x")
+
+
 def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printed_once():
     text = {page: page.read_text() for page in PAGES}
     markers = [
@@ -159,7 +173,7 @@ def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printe
 
 # Inline spans that name a command's output or a pattern, not a command to run.
 NOT_COMMANDS = {"lonlib verify: OK", "lonlib VERB --help"}
-READERS = {"status", "lon", "analyse", "record", "verify"}
+READERS = {"status", "lon", "analyse", "record", "verify", "thin"}
 
 
 def documented_commands() -> list[tuple[str, str]]:

@@ -19,7 +19,7 @@ import pandas as pd
 
 from lonlib.analysis.claims import claims_from_trials
 from lonlib.analysis.claims_report import cell, markdown_table
-from lonlib.util.readme_tables import splice_generated
+from lonlib.util.readme_tables import has_markers, splice_generated
 
 KEYS = ["p", "run", "index"]
 README_BEGIN = "<!-- claims-robust:begin (lonlib analyse data/reference --docs docs/results.md) -->"
@@ -139,6 +139,6 @@ def splice_side_by_side(readme: str, markdown: str, source: str) -> str:
     """``readme`` with the text between :data:`README_BEGIN` and :data:`README_END` replaced
     by ``markdown`` (or :data:`NOT_COMPUTED` when it is empty) under a line naming the
     experiment folder ``source``; a page without the markers is returned unchanged."""
-    if README_BEGIN not in readme:
+    if not has_markers(readme, README_BEGIN):
         return readme
     return splice_generated(readme, README_BEGIN, README_END, markdown or NOT_COMPUTED, source)

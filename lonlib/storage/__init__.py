@@ -91,6 +91,7 @@ from lonlib.storage.status import (
     experiment_status,
     run_status,
 )
+from lonlib.storage.thin import HISTORY_GLOB, ThinReport, thin_histories, thinned_history
 from lonlib.storage.trials import (
     TRIAL_COLUMNS,
     TRIAL_FIELDS,
@@ -148,6 +149,10 @@ __all__ = [
     "experiment_digest",
     "experiment_status",
     "history_path",
+    "HISTORY_GLOB",
+    "ThinReport",
+    "thin_histories",
+    "thinned_history",
     "inflight_checkpoints",
     "inflight_folder",
     "installed_versions",
