@@ -21,8 +21,9 @@ from lonlib.util.validation import check_range
 # `lonlib --help`, plain text (no markup: the terminal shows it as it is written).
 DESCRIPTION = """\
 Local Optima Networks of DDPG on the coupled inverted pendulums task: sample them by basin
-hopping (run), follow and analyse them (status, lon, analyse, record, verify), calibrate the
-physics (calibrate). Run 'lonlib VERB --help' for a verb's options.
+hopping (run), follow and analyse them (status, lon, analyse, record, verify), thin their
+training histories before committing them (thin), calibrate the physics (calibrate).
+Run 'lonlib VERB --help' for a verb's options.
 
 Every verb takes --dry-run: check the arguments, the configuration, the executor and the
 folders, then stop before any compute or write.

@@ -9,6 +9,7 @@ import importlib
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -136,7 +137,7 @@ def test_the_generated_tables_equal_what_the_code_generates_from_the_committed_d
     side = figures / "claims_nominal_robust.csv"
     robust = side_by_side_markdown(pd.read_csv(side)) if side.exists() else ""
     assert splice_side_by_side(page, robust, source) == page
-    assert "<!-- claims-robust:begin" in page
+    assert splice_side_by_side(page, "another table", source) != page  # the block is there
     # the stored summary is what the stored runs give (a commit of new searches without
     # `lonlib analyse` fails here)
     stored = read_experiment_trials(folder)
@@ -186,6 +187,7 @@ def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printe
 # Inline spans that name a command's output or a pattern, not a command to run.
 NOT_COMMANDS = {"lonlib verify: OK", "lonlib VERB --help"}
 READERS = {"status", "lon", "analyse", "record", "verify", "thin"}
+WRITERS = {"thin"}  # reading verbs that change the folder (without --dry-run)
 
 
 def documented_commands() -> list[tuple[str, str]]:
@@ -253,6 +255,10 @@ def _lonlib(argv: list[str], project: Path, capsys) -> str:
     verb = argv[0]
     if verb in READERS and len(argv) > 1 and not Path(argv[1]).exists():
         Path(argv[1]).symlink_to(REFERENCE)
+    if verb in WRITERS and len(argv) > 1:  # a dry run, but never on the committed data
+        copy = project / "copy-of" / Path(argv[1]).name
+        shutil.copytree(Path(argv[1]).resolve(), copy, ignore=shutil.ignore_patterns(".inflight"))
+        argv[1] = str(copy)
     real = verb == "status"
     try:
         main(argv if real else [*argv, "--dry-run"])

@@ -38,6 +38,7 @@ from lonlib.task.rollout import Scoring, nominal_offsets, run_actors
 ROOT = Path(__file__).resolve().parents[1]
 TINY = named_calibration("tiny")
 BASE = TINY.cells[0]
+BASE_TWO_CART = Cell()  # the two-cart study's default cell
 
 
 def tiny_study(*cells: Cell) -> CalibrationConfig:
@@ -151,6 +152,49 @@ def test_an_upright_start_cell_trains_and_scores_from_upright_and_keeps_old_cell
 def test_a_start_angle_out_of_range_is_refused_by_name(angle):
     with pytest.raises(ValueError, match="initial_angle must be"):
         dataclasses.replace(BASE, initial_angle=angle)
+
+
+def test_the_committed_study_cells_read_back_with_the_grid_and_keep_their_identity():
+    config = load_calibration(ROOT / "configs" / "study-two-cart.yaml")
+    out = ROOT / "data" / "studies" / "two-cart"
+    stored = {path.stem for path in (out / "cells").glob("*.json")}
+    assert len(stored) >= 4
+    for cell in config.cells:
+        if cell.name in stored:
+            record = study.read_cell(out, cell, config)  # refused if its settings changed
+            assert record is not None and record["cell"] == json_roundtrip(cell.to_dict())
+
+
+def test_a_base_start_angle_is_refused_naming_the_cells_own():
+    with pytest.raises(ValueError, match=r"env\.initial_angle must be pi.*cells\[i\]"):
+        CalibrationConfig.from_mapping({"base": "tiny", "env": {"initial_angle": 0.0}})
+
+
+def test_the_reports_mark_an_upright_cell_among_cells_stored_before_the_setting():
+    from lonlib.calibration.report import (
+        calibration_markdown,
+        cell_table,
+        search_table,
+        study_markdown,
+        study_table,
+    )
+
+    out = ROOT / "data" / "studies" / "two-cart" / "cells"
+    old = json.loads((out / f"{BASE_TWO_CART.name}.json").read_text())
+    assert "initial_angle" not in old["cell"]  # stored before the setting existed
+    upright = json.loads(json.dumps(old))
+    upright["cell"]["initial_angle"] = 0.0
+    upright["name"] = BASE_TWO_CART.name + "_upright-start"
+    records = [old, upright]
+    searches = search_table(records)
+    table = study_table(searches)
+    assert list(table["initial_angle"]) == [math.pi, 0.0]
+    rows = study_markdown(table).splitlines()[2:]
+    assert "| initial |" in rows[0] and "| initial, upright |" in rows[1]
+    cells = calibration_markdown(
+        cell_table(searches, records), study.integrator_drift(TINY.env, steps=20)
+    )
+    assert "height (upright-start)" in cells and "| height |" in cells
 
 
 # ------------------------------------------------------------------- continue from best

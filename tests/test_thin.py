@@ -69,6 +69,36 @@ def test_thinning_changes_only_the_histories_and_the_folder_still_verifies(
     assert report.ok, report.findings
 
 
+def test_the_thin_command_dry_run_writes_nothing_and_the_real_one_thins(
+    tiny_experiment, tmp_path, capsys
+):
+    _, folder, _ = tiny_experiment
+    root = tmp_path / "exp"
+    shutil.copytree(folder, root)
+    path = sorted(root.glob(HISTORY_GLOB))[0]
+    history = pd.read_parquet(path)
+    history.loc[history.index[0], "greedy_fitness"] = np.nan
+    history.to_parquet(path, index=False)
+    before = _files(root)
+    main(["thin", str(root), "--dry-run"])
+    assert capsys.readouterr().out.startswith("would thin ")
+    assert _files(root) == before
+    main(["thin", str(root)])
+    assert capsys.readouterr().out.startswith("thinned ")
+    assert _files(root) != before
+    assert len(pd.read_parquet(path)) == len(history) - 1
+
+
+def test_a_history_without_a_greedy_fitness_is_named(tiny_experiment, tmp_path):
+    _, folder, _ = tiny_experiment
+    root = tmp_path / "exp"
+    shutil.copytree(folder, root)
+    path = sorted(root.glob(HISTORY_GLOB))[0]
+    pd.read_parquet(path).drop(columns="greedy_fitness").to_parquet(path, index=False)
+    with pytest.raises(ValueError, match=f"{path.name}: a training history must have"):
+        thin_histories(root)
+
+
 def test_thin_refuses_a_folder_without_an_experiment(tmp_path, capsys):
     with pytest.raises(MissingExperimentError):
         thin_histories(tmp_path)

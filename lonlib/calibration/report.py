@@ -11,6 +11,7 @@ stored and writes ``calibration.csv`` (one row per cell, :func:`cell_table`),
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -325,7 +326,9 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
             else f"{row['motor']} × {row['motor_gain']:g}"
         )
         end = "survives" if row["best_end_reason"] == "step_limit" else row["best_end_reason"]
-        kinds = [k for k in ("upright-start", "explore", "continue") if f"_{k}" in str(row["cell"])]
+        start = re.search(r"_(upright-start|start[^_]+)", str(row["cell"]))
+        kinds = [start.group(1)] if start else []
+        kinds += [k for k in ("explore", "continue") if f"_{k}" in str(row["cell"])]
         reward = row["reward"] + (f" ({', '.join(kinds)})" if kinds else "")
         lines.append(
             f"| {motor} | {row['integrator']} | {reward} "

@@ -306,6 +306,11 @@ class CalibrationConfig:
         check_range("max_steps", self.max_steps, 1)
         check_range("batch_size", self.batch_size, 1)
         check_range("drift_steps", self.drift_steps, 1, 100_000)
+        if self.env.initial_angle != math.pi:
+            raise ValueError(
+                f"env.initial_angle must be pi (hanging; each cell sets its own start: "
+                f"cells[i].initial_angle), got {self.env.initial_angle!r}"
+            )
         for cell in self.cells:  # every cell's physics must be valid before any compute
             cell.env(self.env)
         for index, cell in enumerate(self.cells):

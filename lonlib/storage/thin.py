@@ -4,11 +4,13 @@ A local search's history (``history_<i>.parquet``) holds one row per training ep
 ``judge_every`` > 0 most rows are episodes whose policy was not judged (no greedy fitness),
 and on one cart a search that keeps falling off early runs thousands of short episodes: the
 one-cart LON's histories were ~80 % of its folder. Thinning keeps the rows that carry a
-greedy fitness (the judged policies: the search's fitness curve) and the last row (the
-search's final env steps and losses), and drops the others. Nothing else in the folder
+greedy fitness (the judged policies: the search's fitness curve) and the last row (its
+last training episode's env steps and losses), and drops the others. Nothing else in the folder
 changes; no stored fitness, optimum, label or recording depends on a history, so `lonlib
 verify` replays a thinned folder as before. A thinned history is a summary: the dropped rows
-come back only by re-running the search (the result path repeats bit for bit).
+come back only by re-running the search (the result path repeats bit for bit). Thinning
+changes the folder's :func:`lonlib.storage.result_path.experiment_digest` (it hashes the
+histories): compare a re-run with a thinned folder after thinning the re-run too.
 """
 
 from __future__ import annotations
@@ -72,7 +74,10 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
     thinned = rows_before = rows_after = bytes_before = bytes_after = 0
     for path in files:
         history = pd.read_parquet(path)
-        kept = thinned_history(history)
+        try:
+            kept = thinned_history(history)
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from None
         size = path.stat().st_size
         rows_before += len(history)
         rows_after += len(kept)
