@@ -493,12 +493,16 @@ def build_parser() -> argparse.ArgumentParser:
         "so far (at least one), naming the cells not finished yet",
     )
     calibrate.set_defaults(func=_calibrate)
-    for verb in sub.choices.values():
+    for name, verb in sub.choices.items():
         verb.add_argument(
             "--dry-run",
             action="store_true",
-            help="check the arguments, configuration, executor and folders; compute and "
-            "write nothing",
+            help=(
+                "read the histories and say what thinning would drop; write nothing"
+                if name == "thin"
+                else "check the arguments, configuration, executor and folders; compute and "
+                "write nothing"
+            ),
         )
     return parser
 

@@ -154,6 +154,21 @@ def test_a_start_angle_out_of_range_is_refused_by_name(angle):
         dataclasses.replace(BASE, initial_angle=angle)
 
 
+@pytest.mark.parametrize(
+    ("cell", "error", "message"),
+    [
+        ({"initial_angle": 7.0}, ValueError, r"^cells\[1\]\.initial_angle must be in \[0, 2 pi\)"),
+        ({"motor": "jet"}, ValueError, r"^cells\[1\]\.motor must be one of"),
+        ({"motor_tau": "fast"}, ValueError, r"^cells\[1\]\.motor_tau must be a number"),
+        ({"bogus": 1}, ValueError, r"^cells\[1\] must be a mapping of"),
+    ],
+)
+def test_a_grid_cells_bad_field_is_refused_naming_the_cell_and_field(cell, error, message):
+    cells = [{"reward": "height"}, {"reward": "height", **cell}]
+    with pytest.raises(error, match=message):
+        CalibrationConfig.from_mapping({"base": "tiny", "cells": cells})
+
+
 def test_the_committed_study_cells_read_back_with_the_grid_and_keep_their_identity():
     config = load_calibration(ROOT / "configs" / "study-two-cart.yaml")
     out = ROOT / "data" / "studies" / "two-cart"

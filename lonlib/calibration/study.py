@@ -395,10 +395,15 @@ class CalibrationConfig:
         listed = merged.pop("cells")
         if not isinstance(listed, (list, tuple)):
             raise ValueError(f"cells must be a list of mappings (one per cell), got {listed!r}")
-        for cell in listed:
+        for index, cell in enumerate(listed):
             if not isinstance(cell, dict) or set(cell) - cell_fields:
-                raise ValueError(f"a cell must be a mapping of {sorted(cell_fields)}, got {cell!r}")
-            cells.append(Cell(**cell))
+                raise ValueError(
+                    f"cells[{index}] must be a mapping of {sorted(cell_fields)}, got {cell!r}"
+                )
+            try:
+                cells.append(Cell(**cell))
+            except (TypeError, ValueError) as error:  # name the cell the field belongs to
+                raise type(error)(f"cells[{index}].{error}") from error
         return cls(
             cells=tuple(cells),
             env=PendulumConfig.from_mapping(env),
