@@ -154,18 +154,27 @@ def test_a_start_angle_out_of_range_is_refused_by_name(angle):
         dataclasses.replace(BASE, initial_angle=angle)
 
 
+@pytest.mark.parametrize("index", [0, 1])
 @pytest.mark.parametrize(
-    ("cell", "error", "message"),
+    ("cell", "message"),
     [
-        ({"initial_angle": 7.0}, ValueError, r"^cells\[1\]\.initial_angle must be in \[0, 2 pi\)"),
-        ({"motor": "jet"}, ValueError, r"^cells\[1\]\.motor must be one of"),
-        ({"motor_tau": "fast"}, ValueError, r"^cells\[1\]\.motor_tau must be a number"),
-        ({"bogus": 1}, ValueError, r"^cells\[1\] must be a mapping of"),
+        ({"initial_angle": 7.0}, r"\.initial_angle must be in \[0, 2 pi\)"),
+        ({"motor": "jet"}, r"\.motor must be one of"),
+        ({"motor_tau": "fast"}, r"\.motor_tau must be a number"),
+        ({"bogus": 1}, r" must be a mapping of"),
+        ({"motor_tau": 0.01}, r": motor_tau must be in \[dt / substeps"),  # the cell's physics
     ],
 )
-def test_a_grid_cells_bad_field_is_refused_naming_the_cell_and_field(cell, error, message):
-    cells = [{"reward": "height"}, {"reward": "height", **cell}]
-    with pytest.raises(error, match=message):
+def test_a_grid_cells_bad_field_is_refused_naming_the_cell_and_field(index, cell, message):
+    cells = [{"reward": "slow-height"}, {"reward": "slow-height"}]
+    cells[index] = {"reward": "height", **cell}
+    with pytest.raises(ValueError, match=rf"^cells\[{index}\]{message}"):
+        CalibrationConfig.from_mapping({"base": "tiny", "cells": cells})
+
+
+def test_a_repeated_cell_is_refused_naming_both():
+    cells = [{"reward": "height"}, {"reward": "slow-height"}, {"reward": "height"}]
+    with pytest.raises(ValueError, match=r"^cells\[2\] repeats cells\[0\] \(velocity"):
         CalibrationConfig.from_mapping({"base": "tiny", "cells": cells})
 
 

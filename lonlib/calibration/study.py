@@ -299,8 +299,12 @@ class CalibrationConfig:
         if not self.cells or not all(isinstance(c, Cell) for c in self.cells):
             raise ValueError("cells must list at least one Cell")
         names = [cell.name for cell in self.cells]
-        if len(set(names)) != len(names):
-            raise ValueError(f"cells must not repeat, got {names}")
+        for index, name in enumerate(names):
+            if name in names[:index]:
+                raise ValueError(
+                    f"cells[{index}] repeats cells[{names.index(name)}] ({name}); "
+                    "cells must not repeat"
+                )
         check_range("seeds", self.seeds, 1, 1000)
         check_range("seed", self.seed, 0, 2**63 - 1)
         check_range("max_steps", self.max_steps, 1)
@@ -311,8 +315,11 @@ class CalibrationConfig:
                 f"env.initial_angle must be pi (hanging; each cell sets its own start: "
                 f"cells[i].initial_angle), got {self.env.initial_angle!r}"
             )
-        for cell in self.cells:  # every cell's physics must be valid before any compute
-            cell.env(self.env)
+        for index, cell in enumerate(self.cells):  # each cell's physics, before any compute
+            try:
+                cell.env(self.env)
+            except ValueError as error:
+                raise ValueError(f"cells[{index}]: {error}") from error
         for index, cell in enumerate(self.cells):
             earlier = names[:index]
             if cell.continue_from and cell.continue_from not in earlier:
@@ -402,8 +409,8 @@ class CalibrationConfig:
                 )
             try:
                 cells.append(Cell(**cell))
-            except (TypeError, ValueError) as error:  # name the cell the field belongs to
-                raise type(error)(f"cells[{index}].{error}") from error
+            except ValueError as error:  # name the cell the field belongs to
+                raise ValueError(f"cells[{index}].{error}") from error
         return cls(
             cells=tuple(cells),
             env=PendulumConfig.from_mapping(env),
