@@ -14,6 +14,7 @@ import pandas as pd
 
 from lonlib.storage.atomic import check_output_place
 from lonlib.storage.configs import EXECUTORS
+from lonlib.storage.manifest import CHANGEABLE_FIELDS
 from lonlib.storage.store import CorruptDataError, DataWriteError, p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
@@ -108,6 +109,7 @@ def _run(args: argparse.Namespace) -> None:
         slots=args.slots,
         checkpoint_seconds=args.checkpoint_minutes * 60 if args.checkpoint_minutes else None,
         drain_after_seconds=None if args.drain_after is None else args.drain_after * 60,
+        allow_changes=args.allow_change or (),
     )
     print(f"{len(trials)} local searches stored under {out}")
     if args.drain_after is not None:
@@ -142,8 +144,15 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     check_drain(kind, None if args.drain_after is None else args.drain_after * 60)
     state = _check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
-        updated_manifest(dataclasses.replace(config, executor=kind, slots=slots), out)
-        state = "resumes the experiment stored there"
+        manifest = updated_manifest(
+            dataclasses.replace(config, executor=kind, slots=slots),
+            out,
+            allow_changes=args.allow_change or (),
+        )
+        state = "resumes the experiment stored there" + "".join(
+            f", changing {key} from {old} to {new}"
+            for key, (old, new) in manifest["sessions"][-1].get("changed", {}).items()
+        )
     elif state == "exists":
         state = "an empty experiment folder"
     else:
@@ -400,6 +409,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="lockstep: after this many minutes start no new local search, finish and store "
         "those in flight, and exit; the same command again continues (for a machine whose "
         "time runs out; 0: one search per slot)",
+    )
+    run.add_argument(
+        "--allow-change",
+        action="append",
+        choices=CHANGEABLE_FIELDS,
+        metavar="FIELD",
+        help="let a stored experiment take this setting from the configuration (only "
+        "max_local_searches: a lower cap ends the runs that reach it, a higher one continues "
+        "the runs the old one ended); refused if a stored run has more local searches than "
+        "the new cap; recorded in the manifest",
     )
     run.add_argument("--out", help="output folder (default data/<name>)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -252,3 +252,95 @@ def test_rerunning_a_finished_experiment_changes_no_file(tiny_experiment):
     run_experiment(config, folder, progress=False, executor="lockstep")
     after = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file() and p.name != ".lock"}
     assert after == before
+
+
+def _truncated_copy(out, tmp_path, keep):
+    """A copy of the experiment ``out`` whose runs keep only their first ``keep`` trials (as
+    a run interrupted after them stores it: the trials table is the source of truth)."""
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    for path in copy.glob("p=*/run_*/trials.parquet"):
+        read_trials(path).iloc[:keep].to_parquet(path)
+    return copy
+
+
+def test_a_lowered_local_search_budget_ends_the_runs_that_reach_it(reference, tmp_path):
+    import json
+
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=2)
+    lowered = dataclasses.replace(config, max_local_searches=2)
+    with pytest.raises(ValueError, match=r"different configuration.*--allow-change"):
+        run_experiment(lowered, copy, progress=False)
+    stored = run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])
+    assert stored.groupby(["p", "run"]).size().eq(2).all()  # every run ended, none sampled on
+    manifest = json.loads((copy / "manifest.json").read_text())
+    assert manifest["config"]["max_local_searches"] == 2
+    assert manifest["sessions"][-1]["changed"] == {"max_local_searches": [4, 2]}
+    assert list(status(copy)["finished"]) == [2, 2]
+    # the stored settings now hold: the old budget is the change, and needs asking again
+    with pytest.raises(ValueError, match="different configuration"):
+        run_experiment(config, copy, progress=False)
+
+
+def test_a_budget_below_a_stored_run_is_refused_naming_the_field_and_the_run(reference, tmp_path):
+    config, out, trials = reference
+    longest = trials.groupby(["p", "run"]).size()
+    p, run = longest.idxmax()
+    too_low = dataclasses.replace(config, max_local_searches=int(longest.max()) - 1)
+    before = (out / "manifest.json").read_bytes()
+    with pytest.raises(ValueError, match=rf"max_local_searches.*p={p:g}, run {run}"):
+        run_experiment(too_low, out, progress=False, allow_changes=["max_local_searches"])
+    assert (out / "manifest.json").read_bytes() == before
+    with pytest.raises(ValueError, match="allow_changes must name fields"):
+        run_experiment(config, out, progress=False, allow_changes=["tolerance"])
+
+
+def test_a_raised_budget_continues_the_runs_the_old_one_ended(reference, tmp_path):
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=4)
+    ended_by_budget = [
+        key
+        for key, table in trials.groupby(["p", "run"])
+        if len(table) == config.max_local_searches
+        and not table["accepted"].iloc[-config.tolerance :].eq(False).all()
+    ]
+    raised = dataclasses.replace(config, max_local_searches=5)
+    again = run_experiment(raised, copy, progress=False, allow_changes=["max_local_searches"])
+    counts, before = again.groupby(["p", "run"]).size(), trials.groupby(["p", "run"]).size()
+    assert ended_by_budget  # the tiny experiment has runs its budget ended
+    for key, count in counts.items():
+        assert count > before[key] if key in ended_by_budget else count == before[key]
+    first = again[again["index"] < config.max_local_searches].reset_index(drop=True)
+    pd.testing.assert_frame_equal(first[COMPARED], trials[COMPARED])
+
+
+def test_the_cli_names_a_budget_change_in_its_dry_run(reference, tmp_path, capsys):
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=2)
+    yaml_path = write_tiny_yaml(tmp_path)
+    yaml_path.write_text(
+        yaml_path.read_text().replace("max_local_searches: 4", "max_local_searches: 2")
+    )
+    argv = ["run", str(yaml_path), "--out", str(copy), "--dry-run"]
+    with pytest.raises(SystemExit):
+        cli_main(argv)
+    assert "--allow-change" in capsys.readouterr().err
+    cli_main([*argv, "--allow-change", "max_local_searches"])
+    assert "changing max_local_searches from 4 to 2" in capsys.readouterr().out
+
+
+def test_a_budget_change_is_refused_while_another_process_samples(reference, tmp_path):
+    from lonlib.experiment.runs import hold_runs
+
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=2)
+    before = (copy / "manifest.json").read_bytes()
+    lowered = dataclasses.replace(config, max_local_searches=2)
+    with hold_runs(copy, [(1e-4, 1)]) as held:
+        assert held
+        with pytest.raises(ValueError, match="another process is sampling"):
+            run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])
+    assert (copy / "manifest.json").read_bytes() == before

@@ -18,6 +18,7 @@ import errno
 import logging
 import time
 import warnings
+from collections.abc import Collection
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -160,6 +161,19 @@ def refuse_mixed_result_paths(out: Path) -> None:
         )
 
 
+def _refuse_change_while_sampled(out: Path, manifest: dict[str, Any]) -> None:
+    """ValueError if another process holds a run of ``out``: it samples under the stored
+    settings, which this session changes (``allow_changes``)."""
+    config = manifest["config"]
+    runs = [(p, run) for p in config["perturbations"] for run in range(config["runs"])]
+    with hold_runs(out, runs) as held:
+        if not held:
+            raise ValueError(
+                f"{out}: another process is sampling this experiment; stop it before changing "
+                f"{sorted(manifest['sessions'][-1]['changed'])}"
+            )
+
+
 def run_experiment(
     config: ExperimentConfig,
     out: str | Path,
@@ -171,6 +185,7 @@ def run_experiment(
     slots: int | None = None,
     checkpoint_seconds: float | None = CHECKPOINT_SECONDS,
     drain_after_seconds: float | None = None,
+    allow_changes: Collection[str] = (),
 ) -> pd.DataFrame:
     """Run every unfinished run of ``config`` into ``out``; return all trials.
 
@@ -192,6 +207,12 @@ def run_experiment(
     left unfinished (and unlocked) when they would need more, and the call returns once none is
     in flight; calling it again continues them. The first batch is filled even at 0, so every
     call makes progress.
+
+    ``allow_changes`` names settings of a stored experiment this call may change
+    (:data:`lonlib.storage.manifest.CHANGEABLE_FIELDS`, e.g. a lowered
+    ``max_local_searches``): accepted when every stored run stays a valid run under the new
+    settings and no other process is sampling the folder, and recorded in the manifest's
+    session (:func:`lonlib.storage.manifest.updated_manifest`).
 
     Before any compute: ``out`` must exist or be creatable in an existing folder and accept
     files (:class:`lonlib.storage.store.DataWriteError` otherwise; on Dask, every worker checks it
@@ -219,13 +240,16 @@ def run_experiment(
     capability = torch_cpu_capability()
     with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
         remove_temporary_files(out, manifest_path(out).name)
-        manifest = updated_manifest(config, out, session_provenance(capability))
+        manifest = updated_manifest(config, out, session_provenance(capability), allow_changes)
+        if manifest["sessions"][-1].get("changed"):
+            _refuse_change_while_sampled(out, manifest)
         todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
         if todo and manifest_path(out).exists():
             refuse_mixed_result_paths(out)
         remove_finished_checkpoints(out, todo, config)
-        recorded = bool(todo) or not manifest_path(out).exists()
-        if recorded:  # a finished experiment stays untouched
+        changed = bool(manifest["sessions"][-1].get("changed"))
+        recorded = bool(todo) or changed or not manifest_path(out).exists()
+        if recorded:  # a finished experiment stays untouched, unless its settings change
             write_json(manifest_path(out), manifest)
     bar = None
     try:  # from here on the session records its end, however it stops

@@ -21,6 +21,7 @@ from lonlib.storage.configs import (
     LEARNERS,
     NAMED_CONFIGS,
     ONE_CART_DDPG,
+    ONE_CART_MAX_LOCAL_SEARCHES,
     ONE_CART_RUNS,
     QUICK_DDPG,
     REFERENCE_RUNS,
@@ -64,6 +65,7 @@ from lonlib.storage.lock import (
     lock_holder,
 )
 from lonlib.storage.manifest import (
+    CHANGEABLE_FIELDS,
     PACKAGES,
     capability_change,
     manifest_path,
@@ -101,11 +103,13 @@ from lonlib.storage.trials import (
     read_optimum,
     read_trials,
     replay_trials,
+    runs_ending_early,
     save_step,
     trials_frame,
 )
 
 __all__ = [
+    "CHANGEABLE_FIELDS",
     "CheckpointUnreadable",
     "CorruptDataError",
     "DDPGConfig",
@@ -125,6 +129,7 @@ __all__ = [
     "MissingExperimentError",
     "NAMED_CONFIGS",
     "ONE_CART_DDPG",
+    "ONE_CART_MAX_LOCAL_SEARCHES",
     "ONE_CART_RUNS",
     "OtherSettings",
     "PACKAGES",
@@ -179,6 +184,7 @@ __all__ = [
     "replay_trials",
     "run_dir",
     "run_status",
+    "runs_ending_early",
     "save_step",
     "scan_inflight",
     "session_provenance",

@@ -24,7 +24,7 @@ import math
 import platform
 import subprocess
 import uuid
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -33,9 +33,14 @@ from typing import TYPE_CHECKING, Any
 from lonlib.storage.layout import checked_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.store import read_json, write_json
+from lonlib.storage.trials import runs_ending_early
 
 if TYPE_CHECKING:
     from lonlib.storage.configs import ExperimentConfig
+
+CHANGEABLE_FIELDS = ("max_local_searches",)
+"""Settings a stored experiment may change when asked (``allow_changes``): a run's local
+searches do not depend on them, only where the run ends."""
 
 PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
 
@@ -70,24 +75,48 @@ def _versions() -> dict[str, str | None]:
 
 
 def updated_manifest(
-    config: ExperimentConfig, out: Path, provenance: Mapping[str, Any] | None = None
+    config: ExperimentConfig,
+    out: Path,
+    provenance: Mapping[str, Any] | None = None,
+    allow_changes: Collection[str] = (),
 ) -> dict[str, Any]:
     """The manifest ``out`` should hold for ``config`` (new, or the stored one with this
     session added); refuses a folder holding another experiment. The new session records
-    ``provenance`` (:func:`lonlib.storage.provenance.session_provenance`). Writes nothing."""
+    ``provenance`` (:func:`lonlib.storage.provenance.session_provenance`). Writes nothing.
+
+    ``allow_changes`` names settings of :data:`CHANGEABLE_FIELDS` that may differ from the
+    stored configuration: the change is accepted when every stored run is a valid start of a
+    run under the new settings (:func:`lonlib.storage.trials.runs_ending_early`; a lowered
+    ``max_local_searches`` ends the runs that reach it, a raised one continues the runs the
+    old one ended) and is recorded in the session (``changed``: field, stored value, new)."""
+    unknown = sorted(set(allow_changes) - set(CHANGEABLE_FIELDS))
+    if unknown:
+        raise ValueError(f"allow_changes must name fields of {CHANGEABLE_FIELDS}, got {unknown}")
     path = manifest_path(out)
     now = datetime.now(UTC).isoformat(timespec="seconds")
     if path.exists():
         manifest = checked_manifest(read_json(path), path)
         stored = type(config).from_mapping(manifest["config"])
-        if stored.comparable() != config.comparable():
-            changed = sorted(
-                k for k in config.comparable() if stored.comparable()[k] != config.comparable()[k]
+        changed = _changed_fields(stored, config)
+        refused = [key for key in changed if key not in allow_changes]
+        if refused:
+            hint = (
+                "; "
+                + ", ".join(refused)
+                + " may change where every stored run stays valid: lonlib run "
+                + " ".join(f"--allow-change {key}" for key in refused)
+                + " (allow_changes in Python)"
+                if set(refused) <= set(CHANGEABLE_FIELDS)
+                else ""
             )
             raise ValueError(
-                f"{out} holds an experiment with a different configuration ({changed} differ); "
-                "choose another output folder or use the stored configuration"
+                f"{out} holds an experiment with a different configuration ({refused} differ); "
+                f"choose another output folder or use the stored configuration{hint}"
             )
+        record = {key: [getattr(stored, key), getattr(config, key)] for key in changed}
+        if changed:
+            _check_stored_runs_allow(out, stored, config, changed)
+            stored = dataclasses.replace(stored, **{key: getattr(config, key) for key in changed})
         runs = max(stored.runs, config.runs)
         perturbations = tuple(dict.fromkeys((*stored.perturbations, *config.perturbations)))
         merged = dataclasses.replace(stored, runs=runs, perturbations=perturbations)
@@ -98,6 +127,7 @@ def updated_manifest(
                 "id": uuid.uuid4().hex,
                 "versions": _versions(),
                 "git_commit": _git_commit(),
+                **({"changed": record} if record else {}),
                 # where DDPG ran this session: not configuration (results do not depend on it)
                 "execution": {
                     "device": config.ddpg.device,
@@ -120,6 +150,30 @@ def updated_manifest(
             "sessions": [{"started": now, "id": uuid.uuid4().hex, **(provenance or {})}],
         }
     return manifest
+
+
+def _changed_fields(stored: ExperimentConfig, config: ExperimentConfig) -> list[str]:
+    """The result-changing settings (:meth:`ExperimentConfig.comparable`) that differ."""
+    old, new = stored.comparable(), config.comparable()
+    return sorted(key for key in new if old[key] != new[key])
+
+
+def _check_stored_runs_allow(
+    out: Path, stored: ExperimentConfig, config: ExperimentConfig, changed: list[str]
+) -> None:
+    """ValueError, naming the field and the runs, if a stored run of ``out`` would have
+    ended before its last stored local search under ``config``'s basin-hopping settings."""
+    early = runs_ending_early(out, config.basin_hopping)
+    if early:
+        what = ", ".join(
+            f"{key} {getattr(stored, key)} -> {getattr(config, key)}" for key in changed
+        )
+        raise ValueError(
+            f"{out}: cannot change {what}: {len(early)} stored run(s) would have ended before "
+            f"their last stored local search ({'; '.join(early[:5])}"
+            f"{'; ...' if len(early) > 5 else ''}); max_local_searches must be at least every "
+            "stored run's count"
+        )
 
 
 def mark_session_ended(out: Path, session_id: str, seconds: float) -> bool:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -130,6 +131,24 @@ def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -
     if state.incumbent_index >= 0:
         state.incumbent = read_optimum(optimum_path(root, p, run, state.incumbent_index))
     return state
+
+
+def runs_ending_early(
+    root: Path, basin_hopping: Callable[[float], BasinHoppingConfig]
+) -> list[str]:
+    """The stored runs of ``root`` that Algorithm 2 under ``basin_hopping(p)`` would have
+    ended before their last stored local search (each as ``'p=..., run i: n local
+    searches'``); empty when every stored run is a valid start of a run under those
+    settings, e.g. after ``max_local_searches`` is lowered to no less than any run's count."""
+    early = []
+    for path in sorted(Path(root).glob("p=*/run_*/trials.parquet")):
+        table = read_trials(path)
+        if table.empty:
+            continue
+        p, run = float(table["p"].iloc[0]), int(table["run"].iloc[0])
+        if replay_trials(table.iloc[:-1], basin_hopping(p)).finished:
+            early.append(f"p={p:g}, run {run}: {len(table)} local searches")
+    return early
 
 
 def read_experiment_trials(root: Path) -> pd.DataFrame:
