@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.storage.atomic import check_output_place
-from lonlib.storage.configs import EXECUTORS
+from lonlib.storage.configs import EXECUTORS, NAMED_CONFIGS
 from lonlib.storage.manifest import CHANGEABLE_FIELDS
 from lonlib.storage.store import CorruptDataError, DataWriteError, p_label
 from lonlib.util.messages import show_lonlib_messages
@@ -381,7 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="VERB")
 
     run = sub.add_parser("run", help="run (or resume) an experiment")
-    run.add_argument("config", help="'quick', 'reference', 'paper' or a YAML file")
+    run.add_argument("config", help=f"one of {', '.join(NAMED_CONFIGS)}, or a YAML file")
     run.add_argument("--p", type=float, nargs="+", help="perturbation strengths (override)")
     run.add_argument("--runs", type=int, help="runs per p (override)")
     run.add_argument("--workers", type=int, default=1, help="local worker processes")
