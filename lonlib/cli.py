@@ -417,8 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FIELD",
         help="let a stored experiment take this setting from the configuration (only "
         "max_local_searches: a lower cap ends the runs that reach it, a higher one continues "
-        "the runs the old one ended); refused if a stored run has more local searches than "
-        "the new cap; recorded in the manifest",
+        "the runs the old cap ended, not those T ended); refused if a stored run has more "
+        "local searches than the new cap; recorded in the manifest",
     )
     run.add_argument("--out", help="output folder (default data/<name>)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")

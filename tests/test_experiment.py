@@ -81,8 +81,9 @@ def test_only_result_changing_settings_must_match_to_resume(reference, tmp_path)
     again = run_experiment(elsewhere, out, progress=False)
     pd.testing.assert_frame_equal(again[COMPARED], trials[COMPARED])
     changed = dataclasses.replace(config, ddpg=dataclasses.replace(config.ddpg, batch_size=16))
-    with pytest.raises(ValueError, match="different configuration"):
+    with pytest.raises(ValueError, match="different configuration") as refused:
         run_experiment(changed, out, progress=False)
+    assert "--allow-change" not in str(refused.value)  # only max_local_searches may change
 
 
 def test_rerun_resumes_and_redoes_nothing(reference):
@@ -254,28 +255,45 @@ def test_rerunning_a_finished_experiment_changes_no_file(tiny_experiment):
     assert after == before
 
 
-def _truncated_copy(out, tmp_path, keep):
+def _truncated_copy(out, tmp_path, keep, longer=None):
     """A copy of the experiment ``out`` whose runs keep only their first ``keep`` trials (as
-    a run interrupted after them stores it: the trials table is the source of truth)."""
+    a run interrupted after them stores it: the trials table is the source of truth), but
+    the runs of ``longer`` (a mapping ``(p, run) -> count``) keep that many."""
     import shutil
 
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     for path in copy.glob("p=*/run_*/trials.parquet"):
-        read_trials(path).iloc[:keep].to_parquet(path)
+        table = read_trials(path)
+        key = (float(table["p"].iloc[0]), int(table["run"].iloc[0]))
+        table.iloc[: (longer or {}).get(key, keep)].to_parquet(path)
     return copy
 
 
-def test_a_lowered_local_search_budget_ends_the_runs_that_reach_it(reference, tmp_path):
+def _reject(folder, p, run, indices):
+    """Store the trials ``indices`` of run ``(p, run)`` as rejected (their parent stays)."""
+    path = trials_path(folder, p, run)
+    table = read_trials(path)
+    table.loc[table["index"].isin(indices), "accepted"] = False
+    table.to_parquet(path)
+
+
+def test_a_lowered_local_search_budget_ends_the_runs_that_reach_it(reference, tmp_path, capsys):
     import json
 
     config, out, trials = reference
     copy = _truncated_copy(out, tmp_path, keep=2)
-    lowered = dataclasses.replace(config, max_local_searches=2)
-    with pytest.raises(ValueError, match=r"different configuration.*--allow-change"):
-        run_experiment(lowered, copy, progress=False)
-    stored = run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])
-    assert stored.groupby(["p", "run"]).size().eq(2).all()  # every run ended, none sampled on
+    yaml_path = write_tiny_yaml(tmp_path)
+    text = yaml_path.read_text()
+    yaml_path.write_text(text.replace("max_local_searches: 4", "max_local_searches: 2"))
+    argv = ["run", str(yaml_path), "--out", str(copy), "--quiet"]
+    with pytest.raises(SystemExit):
+        cli_main(argv)
+    assert "--allow-change max_local_searches" in capsys.readouterr().err
+    cli_main([*argv, "--dry-run", "--allow-change", "max_local_searches"])
+    assert "changing max_local_searches from 4 to 2" in capsys.readouterr().out
+    cli_main([*argv, "--allow-change", "max_local_searches"])
+    assert "8 local searches stored" in capsys.readouterr().out  # every run ended, none sampled
     manifest = json.loads((copy / "manifest.json").read_text())
     assert manifest["config"]["max_local_searches"] == 2
     assert manifest["sessions"][-1]["changed"] == {"max_local_searches": [4, 2]}
@@ -285,62 +303,81 @@ def test_a_lowered_local_search_budget_ends_the_runs_that_reach_it(reference, tm
         run_experiment(config, copy, progress=False)
 
 
-def test_a_budget_below_a_stored_run_is_refused_naming_the_field_and_the_run(reference, tmp_path):
+def test_a_budget_below_a_stored_run_is_refused_naming_the_field_and_that_run(reference, tmp_path):
     config, out, trials = reference
-    longest = trials.groupby(["p", "run"]).size()
-    p, run = longest.idxmax()
-    too_low = dataclasses.replace(config, max_local_searches=int(longest.max()) - 1)
-    before = (out / "manifest.json").read_bytes()
-    with pytest.raises(ValueError, match=rf"max_local_searches.*p={p:g}, run {run}"):
-        run_experiment(too_low, out, progress=False, allow_changes=["max_local_searches"])
-    assert (out / "manifest.json").read_bytes() == before
-    with pytest.raises(ValueError, match="allow_changes must name fields"):
-        run_experiment(config, out, progress=False, allow_changes=["tolerance"])
+    copy = _truncated_copy(out, tmp_path, keep=2, longer={(1e-3, 1): 4})
+    too_low = dataclasses.replace(config, max_local_searches=3)
+    before = (copy / "manifest.json").read_bytes()
+    with pytest.raises(ValueError, match=r"max_local_searches 4 -> 3.*\(p=0.001, run 1: 4 local"):
+        run_experiment(too_low, copy, progress=False, allow_changes=["max_local_searches"])
+    try:
+        run_experiment(too_low, copy, progress=False, allow_changes=["max_local_searches"])
+    except ValueError as error:
+        assert str(error).count("run ") == 1  # only the run that is too long
+    assert (copy / "manifest.json").read_bytes() == before
+    for bad in (["tolerance"], "max_local_searches", None):
+        with pytest.raises(ValueError, match="allow_changes must"):
+            run_experiment(config, copy, progress=False, allow_changes=bad)
 
 
-def test_a_raised_budget_continues_the_runs_the_old_one_ended(reference, tmp_path):
+def test_a_run_stored_past_its_end_is_refused_and_verify_names_it(reference, tmp_path):
+    from lonlib.analysis.verify import algorithm_findings
+    from lonlib.storage.store import read_experiment_trials
+
     config, out, trials = reference
     copy = _truncated_copy(out, tmp_path, keep=4)
-    ended_by_budget = [
-        key
-        for key, table in trials.groupby(["p", "run"])
-        if len(table) == config.max_local_searches
-        and not table["accepted"].iloc[-config.tolerance :].eq(False).all()
-    ]
+    _reject(copy, 1e-4, 0, [1, 2])  # T = 2 failures: the run ended after its third search
+    with pytest.raises(ValueError, match=r"go on past where Algorithm 2.*p=0.0001, run 0: 4"):
+        run_experiment(config, copy, progress=False)
+    findings = algorithm_findings(config, read_experiment_trials(copy))
+    assert {(f.p, f.run, f.index) for f in findings if "after the run ended" in f.message} == {
+        (1e-4, 0, 3)
+    }
+    assert all(f.check == "algorithm" and (f.p, f.run) == (1e-4, 0) for f in findings)
+    assert algorithm_findings(config, trials) == []
+
+
+def test_a_raised_budget_continues_the_runs_the_budget_ended_not_those_t_ended(reference, tmp_path):
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=4)
+    _reject(copy, 1e-3, 1, [2, 3])  # this run ended by T = 2 exactly at the old budget
     raised = dataclasses.replace(config, max_local_searches=5)
     again = run_experiment(raised, copy, progress=False, allow_changes=["max_local_searches"])
-    counts, before = again.groupby(["p", "run"]).size(), trials.groupby(["p", "run"]).size()
-    assert ended_by_budget  # the tiny experiment has runs its budget ended
-    for key, count in counts.items():
-        assert count > before[key] if key in ended_by_budget else count == before[key]
-    first = again[again["index"] < config.max_local_searches].reset_index(drop=True)
-    pd.testing.assert_frame_equal(first[COMPARED], trials[COMPARED])
+    counts = again.groupby(["p", "run"]).size()
+    assert counts[(1e-3, 1)] == 4
+    assert all(count == 5 for key, count in counts.items() if key != (1e-3, 1))
+    first = again[again["index"] < 4].reset_index(drop=True)
+    unchanged = first[(first["p"] != 1e-3) | (first["run"] != 1)].reset_index(drop=True)
+    expected = trials[(trials["p"] != 1e-3) | (trials["run"] != 1)].reset_index(drop=True)
+    pd.testing.assert_frame_equal(unchanged[COMPARED], expected[COMPARED])
 
 
-def test_the_cli_names_a_budget_change_in_its_dry_run(reference, tmp_path, capsys):
-    config, out, trials = reference
-    copy = _truncated_copy(out, tmp_path, keep=2)
-    yaml_path = write_tiny_yaml(tmp_path)
-    yaml_path.write_text(
-        yaml_path.read_text().replace("max_local_searches: 4", "max_local_searches: 2")
-    )
-    argv = ["run", str(yaml_path), "--out", str(copy), "--dry-run"]
-    with pytest.raises(SystemExit):
-        cli_main(argv)
-    assert "--allow-change" in capsys.readouterr().err
-    cli_main([*argv, "--allow-change", "max_local_searches"])
-    assert "changing max_local_searches from 4 to 2" in capsys.readouterr().out
-
-
-def test_a_budget_change_is_refused_while_another_process_samples(reference, tmp_path):
+@pytest.mark.parametrize("other", ["a sampling session", "an older lonlib holding run 0"])
+def test_a_budget_change_is_refused_while_another_process_samples(reference, tmp_path, other):
     from lonlib.experiment.runs import hold_runs
+    from lonlib.storage.layout import SAMPLING_LOCK
+    from lonlib.storage.lock import SamplingLock
 
     config, out, trials = reference
     copy = _truncated_copy(out, tmp_path, keep=2)
     before = (copy / "manifest.json").read_bytes()
     lowered = dataclasses.replace(config, max_local_searches=2)
-    with hold_runs(copy, [(1e-4, 1)]) as held:
+    sampling = SamplingLock(copy / SAMPLING_LOCK)
+    with hold_runs(copy, [(1e-3, 0)] if other != "a sampling session" else []) as held:
         assert held
+        if other == "a sampling session":
+            sampling.acquire(exclusive=False)
         with pytest.raises(ValueError, match="another process is sampling"):
             run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])
+        sampling.release()
     assert (copy / "manifest.json").read_bytes() == before
+    run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])
+
+
+def test_an_empty_trials_table_ends_no_run_early(reference, tmp_path):
+    from lonlib.storage import runs_ending_early
+
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=4, longer={(1e-4, 1): 0})
+    assert runs_ending_early(copy, config.basin_hopping) == []
+    assert runs_ending_early(copy, dataclasses.replace(config, max_local_searches=3).basin_hopping)

@@ -14,6 +14,10 @@ checks, exactly (bit for bit, no tolerance):
   initial Actor for its first search, else the stored parent optimum perturbed with the
   trial's own stream (:func:`lonlib.search.algorithm.search_start`), so the *improved on
   start* counts replay too;
+* ``algorithm``: each run is Algorithm 2 under the manifest's settings: every trial's parent
+  is the incumbent, it is accepted exactly when ``f >= f*`` (the first always), and no trial
+  comes after the run's end (T consecutive failures or ``max_local_searches``), so a run
+  sampled on under other settings is caught;
 * ``recording``: every ``recordings/*.rrd`` names a stored trial (p, run, index) in its
   ``optimum`` property, carries that trial's fitness, and its Actor replays to it.
 
@@ -35,7 +39,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lonlib.search.algorithm import random_parameters, search_start
+from lonlib.search.algorithm import RunState, Trial, random_parameters, search_start
 from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.store import CorruptDataError, optimum_path, read_manifest, read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
@@ -196,6 +200,7 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
             )
         )
     report.findings.extend(_provenance_findings(folder))
+    report.findings.extend(algorithm_findings(config, trials, mismatch))
     thetas, rows = _stored_actors(folder, trials, config, report, mismatch)
     scoring = config.ddpg.scoring
     replayed: dict[tuple[float, int, int], BehaviourDescriptor] = {}
@@ -210,6 +215,55 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     if recordings:
         _check_recordings(folder, trials, replayed, report, mismatch)
     return report
+
+
+def algorithm_findings(config, trials: pd.DataFrame, severity: str = "error") -> list[Finding]:
+    """The ``algorithm`` check: where the stored runs of ``trials`` are not Algorithm 2's
+    bookkeeping under ``config``'s basin-hopping settings (parents, acceptance by
+    ``f >= f*``, the run's end)."""
+    findings = []
+    ordered = trials.sort_values(["p", "run", "index"])
+    for (p, run), table in ordered.groupby(["p", "run"], sort=False):
+        settings = config.basin_hopping(float(p))
+        state = RunState(trials=[], incumbent=None, incumbent_index=-1, failures=0)
+        best = None
+        for row in table.to_dict("records"):
+            where = (float(p), int(run), int(row["index"]))
+            if state.finished:
+                findings.append(
+                    Finding(
+                        severity,
+                        "algorithm",
+                        *where,
+                        f"stored after the run ended ({state.end_reason}: T = "
+                        f"{settings.tolerance}, max_local_searches = "
+                        f"{settings.max_local_searches})",
+                    )
+                )
+                break
+            accepted, fitness = bool(row["accepted"]), float(row["fitness"])
+            if int(row["parent"]) != state.incumbent_index:
+                findings.append(
+                    Finding(
+                        severity,
+                        "algorithm",
+                        *where,
+                        f"parent {row['parent']} is not the incumbent {state.incumbent_index}",
+                    )
+                )
+            if accepted != (best is None or fitness >= best):
+                findings.append(
+                    Finding(
+                        severity,
+                        "algorithm",
+                        *where,
+                        f"accepted={accepted} but f = {fitness!r} against f* = {best!r}",
+                    )
+                )
+            best = fitness if accepted else best
+            trial = Trial(where[2], int(row["parent"]), fitness, accepted, 0.0, 0)
+            state.record(trial, None, settings)
+    return findings
 
 
 def _stored_actors(

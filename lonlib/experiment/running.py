@@ -54,7 +54,8 @@ from lonlib.storage.configs import (  # noqa: F401  (re-exported: configurations
     load_config,
     named_config,
 )
-from lonlib.storage.lock import LockHeld, exclusive_lock
+from lonlib.storage.layout import SAMPLING_LOCK, run_dir
+from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.manifest import (
     capability_change,
     manifest_path,
@@ -161,17 +162,35 @@ def refuse_mixed_result_paths(out: Path) -> None:
         )
 
 
-def _refuse_change_while_sampled(out: Path, manifest: dict[str, Any]) -> None:
-    """ValueError if another process holds a run of ``out``: it samples under the stored
-    settings, which this session changes (``allow_changes``)."""
-    config = manifest["config"]
-    runs = [(p, run) for p in config["perturbations"] for run in range(config["runs"])]
-    with hold_runs(out, runs) as held:
-        if not held:
-            raise ValueError(
-                f"{out}: another process is sampling this experiment; stop it before changing "
-                f"{sorted(manifest['sessions'][-1]['changed'])}"
-            )
+def _hold_sampling_lock(
+    out: Path, manifest: dict[str, Any], sampling: SamplingLock, changed: bool
+) -> None:
+    """Hold ``out``'s sampling lock for this session: shared, or exclusively when the session
+    changes the stored settings (``allow_changes``), refused with a ValueError while another
+    session samples (under the old settings). Runs another process holds refuse a change
+    too: a session of an older lonlib holds run locks but no sampling lock."""
+    try:
+        sampling.acquire(exclusive=changed)
+    except LockHeld:
+        held = True
+    else:
+        held = False
+        if changed:
+            config = manifest["config"]
+            started = [
+                (p, run)
+                for p in config["perturbations"]
+                for run in range(config["runs"])
+                if run_dir(out, p, run).exists()
+            ]
+            with hold_runs(out, started) as free:
+                held = not free
+    if held:
+        sampling.release()
+        raise ValueError(
+            f"{out}: another process is sampling this experiment; stop it before changing "
+            f"{sorted(manifest['sessions'][-1]['changed'])}"
+        )
 
 
 def run_experiment(
@@ -238,19 +257,24 @@ def run_experiment(
     out = Path(out)
     check_output_folder(out)
     capability = torch_cpu_capability()
-    with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
-        remove_temporary_files(out, manifest_path(out).name)
-        manifest = updated_manifest(config, out, session_provenance(capability), allow_changes)
-        if manifest["sessions"][-1].get("changed"):
-            _refuse_change_while_sampled(out, manifest)
-        todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us here
-        if todo and manifest_path(out).exists():
-            refuse_mixed_result_paths(out)
-        remove_finished_checkpoints(out, todo, config)
-        changed = bool(manifest["sessions"][-1].get("changed"))
-        recorded = bool(todo) or changed or not manifest_path(out).exists()
-        if recorded:  # a finished experiment stays untouched, unless its settings change
-            write_json(manifest_path(out), manifest)
+    sampling = SamplingLock(out / SAMPLING_LOCK)
+    try:
+        with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
+            remove_temporary_files(out, manifest_path(out).name)
+            manifest = updated_manifest(config, out, session_provenance(capability), allow_changes)
+            changed = bool(manifest["sessions"][-1].get("changed"))
+            _hold_sampling_lock(out, manifest, sampling, changed)
+            todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us
+            if todo and manifest_path(out).exists():
+                refuse_mixed_result_paths(out)
+            remove_finished_checkpoints(out, todo, config)
+            recorded = bool(todo) or changed or not manifest_path(out).exists()
+            if recorded:  # a finished experiment stays untouched, unless its settings change
+                write_json(manifest_path(out), manifest)
+            sampling.share()
+    except BaseException:
+        sampling.release()
+        raise
     bar = None
     try:  # from here on the session records its end, however it stops
         if todo and config.ddpg.device == "cpu":
@@ -320,6 +344,7 @@ def run_experiment(
             bar.close()
         if recorded:
             _record_session_end(out, manifest["sessions"][-1]["id"], time.monotonic() - started)
+        sampling.release()
     return read_experiment_trials(out)
 
 

@@ -23,6 +23,7 @@ from lonlib.storage.atomic import CorruptDataError, MissingExperimentError, read
 INFLIGHT_FOLDER = ".inflight"  # in the experiment folder: in-flight checkpoints
 RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
 MANIFEST_LOCK = ".manifest.lock"  # in the experiment folder: guards manifest check + update
+SAMPLING_LOCK = ".sampling.lock"  # held shared by every sampling session, exclusive to change it
 
 
 Job = tuple[float, int]  # a run of an experiment: (p, run index)

@@ -64,6 +64,45 @@ def exclusive_lock(path: Path, wait: bool = True, record_holder: bool = True) ->
         os.close(handle)  # releases the lock
 
 
+class SamplingLock:
+    """An experiment folder's sampling lock (:data:`lonlib.storage.layout.SAMPLING_LOCK`).
+    Every sampling session holds it shared for as long as it samples; a session that changes
+    the stored settings (``lonlib run --allow-change``) first takes it exclusively, without
+    waiting, so that no session sampling under the old settings is running. Take it while
+    holding the manifest lock: the exclusive hold then lasts only until :meth:`share`, and
+    a shared request never waits for it."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._handle: int | None = None
+
+    def acquire(self, exclusive: bool) -> None:
+        """Hold it shared, or exclusively (:class:`LockHeld` if another session holds it)."""
+        try:
+            self._handle = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        except OSError as error:
+            raise write_error(self.path, error) from error
+        try:
+            if exclusive:
+                fcntl.flock(self._handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            else:
+                fcntl.flock(self._handle, fcntl.LOCK_SH)
+        except BlockingIOError:
+            self.release()
+            raise LockHeld(self.path, "another sampling session") from None
+
+    def share(self) -> None:
+        """Turn an exclusive hold into a shared one (the change is stored)."""
+        if self._handle is not None:
+            fcntl.flock(self._handle, fcntl.LOCK_SH)
+
+    def release(self) -> None:
+        """Let go (idempotent)."""
+        if self._handle is not None:
+            os.close(self._handle)
+            self._handle = None
+
+
 def lock_holder(path: Path) -> str:
     """Who holds (or last held) the lock at ``path``, in words."""
     try:

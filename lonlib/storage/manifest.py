@@ -89,6 +89,11 @@ def updated_manifest(
     run under the new settings (:func:`lonlib.storage.trials.runs_ending_early`; a lowered
     ``max_local_searches`` ends the runs that reach it, a raised one continues the runs the
     old one ended) and is recorded in the session (``changed``: field, stored value, new)."""
+    if isinstance(allow_changes, str) or not isinstance(allow_changes, Collection):
+        raise ValueError(
+            f"allow_changes must be a list of field names, e.g. ['max_local_searches'], "
+            f"got {allow_changes!r}"
+        )
     unknown = sorted(set(allow_changes) - set(CHANGEABLE_FIELDS))
     if unknown:
         raise ValueError(f"allow_changes must name fields of {CHANGEABLE_FIELDS}, got {unknown}")
@@ -114,8 +119,8 @@ def updated_manifest(
                 f"choose another output folder or use the stored configuration{hint}"
             )
         record = {key: [getattr(stored, key), getattr(config, key)] for key in changed}
+        _check_stored_runs_allow(out, stored, config, changed)
         if changed:
-            _check_stored_runs_allow(out, stored, config, changed)
             stored = dataclasses.replace(stored, **{key: getattr(config, key) for key in changed})
         runs = max(stored.runs, config.runs)
         perturbations = tuple(dict.fromkeys((*stored.perturbations, *config.perturbations)))
@@ -161,17 +166,25 @@ def _changed_fields(stored: ExperimentConfig, config: ExperimentConfig) -> list[
 def _check_stored_runs_allow(
     out: Path, stored: ExperimentConfig, config: ExperimentConfig, changed: list[str]
 ) -> None:
-    """ValueError, naming the field and the runs, if a stored run of ``out`` would have
-    ended before its last stored local search under ``config``'s basin-hopping settings."""
+    """ValueError, naming the runs (and the changed fields), if a stored run of ``out`` would
+    have ended before its last stored local search under ``config``'s basin-hopping
+    settings: with no change, stored runs that went past where the recorded settings end
+    them (sampled by a session under other settings) are refused too."""
     early = runs_ending_early(out, config.basin_hopping)
+    listed = f"{'; '.join(early[:5])}{'; ...' if len(early) > 5 else ''}"
+    if early and not changed:
+        raise ValueError(
+            f"{out}: {len(early)} stored run(s) go on past where Algorithm 2 under the stored "
+            f"settings ends them (T = {config.tolerance}, max_local_searches = "
+            f"{config.max_local_searches}): {listed}; they were sampled under other settings"
+        )
     if early:
         what = ", ".join(
             f"{key} {getattr(stored, key)} -> {getattr(config, key)}" for key in changed
         )
         raise ValueError(
             f"{out}: cannot change {what}: {len(early)} stored run(s) would have ended before "
-            f"their last stored local search ({'; '.join(early[:5])}"
-            f"{'; ...' if len(early) > 5 else ''}); max_local_searches must be at least every "
+            f"their last stored local search ({listed}); max_local_searches must be at least every "
             "stored run's count"
         )
 

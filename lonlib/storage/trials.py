@@ -146,7 +146,11 @@ def runs_ending_early(
         if table.empty:
             continue
         p, run = float(table["p"].iloc[0]), int(table["run"].iloc[0])
-        if replay_trials(table.iloc[:-1], basin_hopping(p)).finished:
+        try:
+            settings = basin_hopping(p)
+        except ValueError as error:
+            raise CorruptDataError(f"{path}: stored p={p!r} is not a valid p ({error})") from error
+        if replay_trials(table.iloc[:-1], settings).finished:
             early.append(f"p={p:g}, run {run}: {len(table)} local searches")
     return early
 
