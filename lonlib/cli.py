@@ -469,7 +469,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     verify = sub.add_parser(
         "verify",
-        help="replay every stored trial and recording from its stored Actor; exit 1 on a mismatch",
+        help="replay every stored trial and recording from its stored Actor and check each "
+        "run's Algorithm 2 bookkeeping; exit 1 on a mismatch",
     )
     verify.add_argument("dir", help="experiment folder, e.g. data/reference")
     verify.add_argument("--no-recordings", action="store_true", help="skip the recordings")

@@ -310,10 +310,9 @@ def test_a_budget_below_a_stored_run_is_refused_naming_the_field_and_that_run(re
     before = (copy / "manifest.json").read_bytes()
     with pytest.raises(ValueError, match=r"max_local_searches 4 -> 3.*\(p=0.001, run 1: 4 local"):
         run_experiment(too_low, copy, progress=False, allow_changes=["max_local_searches"])
-    try:
+    with pytest.raises(ValueError) as refused:
         run_experiment(too_low, copy, progress=False, allow_changes=["max_local_searches"])
-    except ValueError as error:
-        assert str(error).count("run ") == 1  # only the run that is too long
+    assert str(refused.value).count("run ") == 1  # only the run that is too long
     assert (copy / "manifest.json").read_bytes() == before
     for bad in (["tolerance"], "max_local_searches", None):
         with pytest.raises(ValueError, match="allow_changes must"):
@@ -381,3 +380,23 @@ def test_an_empty_trials_table_ends_no_run_early(reference, tmp_path):
     copy = _truncated_copy(out, tmp_path, keep=4, longer={(1e-4, 1): 0})
     assert runs_ending_early(copy, config.basin_hopping) == []
     assert runs_ending_early(copy, dataclasses.replace(config, max_local_searches=3).basin_hopping)
+
+
+def test_a_session_lets_go_of_the_folder_however_its_end_fails(reference, tmp_path, monkeypatch):
+    import lonlib.experiment.running as running
+    from lonlib.storage.layout import SAMPLING_LOCK
+    from lonlib.storage.lock import SamplingLock
+
+    config, out, trials = reference
+    copy = _truncated_copy(out, tmp_path, keep=2)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(running, "_record_session_end", interrupted)
+    lowered = dataclasses.replace(config, max_local_searches=2)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])
+    other = SamplingLock(copy / SAMPLING_LOCK)
+    other.acquire(exclusive=True)  # LockHeld if the session still held it
+    other.release()

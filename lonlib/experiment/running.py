@@ -75,6 +75,7 @@ from lonlib.storage.store import (
     save_step,
     write_json,
 )
+from lonlib.storage.trials import runs_ending_early
 from lonlib.util.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
@@ -162,6 +163,13 @@ def refuse_mixed_result_paths(out: Path) -> None:
         )
 
 
+def _held_by_another(out: Path, run: tuple[float, int]) -> bool:
+    """Does another process hold run ``run``'s lock? (One lock at a time: a folder of
+    thousands of runs must not open them all at once.)"""
+    with hold_runs(out, [run]) as free:
+        return not free
+
+
 def _hold_sampling_lock(
     out: Path, manifest: dict[str, Any], sampling: SamplingLock, changed: bool
 ) -> None:
@@ -183,8 +191,15 @@ def _hold_sampling_lock(
                 for run in range(config["runs"])
                 if run_dir(out, p, run).exists()
             ]
-            with hold_runs(out, started) as free:
-                held = not free
+            held = any(_held_by_another(out, run) for run in started)
+            if not held:  # a search stored past the new cap before we held the lock
+                early = runs_ending_early(out, ExperimentConfig.from_mapping(config).basin_hopping)
+                if early:
+                    sampling.release()
+                    raise ValueError(
+                        f"{out}: cannot change {sorted(manifest['sessions'][-1]['changed'])}: "
+                        f"stored run(s) go on past the new settings: {'; '.join(early[:5])}"
+                    )
     if held:
         sampling.release()
         raise ValueError(
@@ -340,11 +355,14 @@ def run_experiment(
         recorded = False  # a session stopped by a failed write writes nothing more
         raise
     finally:
-        if bar is not None:
-            bar.close()
-        if recorded:
-            _record_session_end(out, manifest["sessions"][-1]["id"], time.monotonic() - started)
-        sampling.release()
+        try:
+            if bar is not None:
+                bar.close()
+            if recorded:
+                seconds = time.monotonic() - started
+                _record_session_end(out, manifest["sessions"][-1]["id"], seconds)
+        finally:  # a session that ends, however, lets go of the folder
+            sampling.release()
     return read_experiment_trials(out)
 
 
