@@ -137,7 +137,10 @@ def power_low_basins(n: int, weights=LOW_BASINS_SOI_WEIGHTS) -> float:
     counts = rng.multinomial(n, np.asarray(weights) / np.sum(weights), POWER_SIMULATIONS)
     n_low = len(weights) // 2
     weak, strong = counts[:, :n_low].min(axis=1), counts[:, n_low:].max(axis=1)
-    low, _ = clopper_pearson(weak, np.maximum(weak + strong, 1), CONFIDENCE)
+    # The interval depends only on (weak, weak + strong): computed once per distinct pair.
+    total = np.maximum(weak + strong, 1)
+    keys, inverse = np.unique(weak * (n + 2) + total, return_inverse=True)
+    low = clopper_pearson(keys // (n + 2), keys % (n + 2), CONFIDENCE)[0][inverse]
     return float(np.mean((low > 0.5) & (weak + strong > 0)))
 
 
