@@ -234,6 +234,7 @@ def _lon(args: argparse.Namespace) -> None:
 def _analyse(args: argparse.Namespace) -> None:
     from lonlib.analysis.claims_report import claims_markdown, splice_readme
     from lonlib.analysis.claims_rescored import side_by_side_markdown, splice_side_by_side
+    from lonlib.analysis.holding import holding_markdown, holding_summary, splice_holding
     from lonlib.analysis.pipeline import analyse
     from lonlib.analysis.summary import splice_summary, summary_markdown
 
@@ -266,6 +267,9 @@ def _analyse(args: argparse.Namespace) -> None:
         text = splice_side_by_side(
             text, side_by_side_markdown(side) if not side.empty else "", args.dir
         )
+        if not result.holding.empty:
+            holding = holding_markdown(holding_summary(result.holding))
+            text = splice_holding(text, holding, args.dir)
         readme.write_text(text, encoding="utf-8")
         print(f"summary and claims tables pasted into {readme}")
     return None
@@ -451,7 +455,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--readme",
         metavar="PAGE",
         help="also paste the summary and claims tables between their markers in this Markdown "
-        "page (docs/results.md; --readme is the former name)",
+        "page, and the optima that hold their rods where it has the holding markers "
+        "(docs/results.md; --readme is the former name)",
     )
     analysis.set_defaults(func=_analyse)
 

@@ -26,12 +26,14 @@ from lonlib.analysis.claims_report import README_END as CLAIMS_END
 from lonlib.analysis.claims_report import claims_markdown, splice_readme
 from lonlib.analysis.claims_rescored import README_BEGIN as ROBUST_BEGIN
 from lonlib.analysis.claims_rescored import side_by_side_markdown, splice_side_by_side
+from lonlib.analysis.holding import README_BEGIN as HOLDING_BEGIN
+from lonlib.analysis.holding import holding_markdown, holding_summary, splice_holding
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import splice_summary, summary_markdown
 from lonlib.calibration.report import DRIFT_HEADER, README_BEGIN, README_END
 from lonlib.cli import build_parser, main
 from lonlib.storage.store import read_experiment_trials
-from lonlib.util.readme_tables import splice_generated
+from lonlib.util.readme_tables import has_markers, splice_generated
 
 ROOT = Path(__file__).parents[1]
 README = ROOT / "README.md"
@@ -143,6 +145,10 @@ def test_the_generated_tables_equal_what_the_code_generates_from_the_committed_d
     stored = read_experiment_trials(folder)
     table = pd.read_csv(figures / "summary.csv")
     assert int(table["local_searches"].sum()) == len(stored)
+    if has_markers(page, HOLDING_BEGIN):  # and its holding table, one row per accepted optimum
+        holding = pd.read_csv(figures / "holding.csv")
+        assert splice_holding(page, holding_markdown(holding_summary(holding)), source) == page
+        assert len(holding) == int(stored["accepted"].sum())
 
 
 def test_a_page_names_its_own_command_in_the_begin_marker_and_keeps_it():
@@ -165,6 +171,7 @@ def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printe
         (SUMMARY_BEGIN, "<!-- summary:end -->"),
         (CLAIMS_BEGIN, CLAIMS_END),
         (ROBUST_BEGIN, "<!-- claims-robust:end -->"),
+        (HOLDING_BEGIN, "<!-- holding:end -->"),
         (README_BEGIN, README_END),
         ("<!-- calibration-one-cart:begin -->", "<!-- calibration-one-cart:end -->"),
         ("<!-- calibration-batch2000:begin -->", "<!-- calibration-batch2000:end -->"),

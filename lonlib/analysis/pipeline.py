@@ -34,6 +34,7 @@ from lonlib.analysis.conditioning import (
     retention_curve,
     stored_actors,
 )
+from lonlib.analysis.holding import holding_table
 from lonlib.analysis.peaks import compare_with_paper, detect_peaks
 from lonlib.analysis.plots import (
     claim_d_curve_plot,
@@ -95,6 +96,7 @@ class Analysis:
     claims_robust: pd.DataFrame = field(default_factory=pd.DataFrame)  # re-scored: robust mean
     claims_side_by_side: pd.DataFrame = field(default_factory=pd.DataFrame)  # nominal | robust
     interactive: dict[str, Any] = field(default_factory=dict)
+    holding: pd.DataFrame = field(default_factory=pd.DataFrame)  # the optima that hold their rods
 
 
 @renamed_keyword("tolerance", "fitness_tolerance")
@@ -117,9 +119,10 @@ def analyse(
     ``close_figures`` closes each matplotlib figure once saved (it stays in the result and
     can still be displayed), so a notebook's inline backend does not show every figure at
     the end of the cell that called this. ``conditioning`` adds the nodes' conditioning
-    (replaying every stored Actor: about a minute for 40 optima on one core) and the claims
+    (replaying every stored Actor: about a minute for 40 optima on one core), the claims
     on the LONs re-scored with the robust mean beside the nominal ones
-    (``claims_robust.csv``, ``claims_nominal_robust.csv`` and ``.md``)."""
+    (``claims_robust.csv``, ``claims_nominal_robust.csv`` and ``.md``) and the optima that
+    hold their rods (``holding.csv``: :mod:`lonlib.analysis.holding`)."""
     folder = Path(folder)
     _, trials = load_experiment(folder)
     out = folder / "figures"
@@ -203,7 +206,8 @@ def analyse(
 def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) -> None:
     """The nodes' conditioning (:mod:`lonlib.analysis.conditioning`): every stored Actor replayed
     (``replayed.csv``), nominal beside robust Figs. 4-5, the retention curve and the table
-    per behaviour label; edges a re-scoring would make deteriorating."""
+    per behaviour label; edges a re-scoring would make deteriorating; the optima that hold
+    their rods."""
     config, _ = load_experiment(folder)
     replayed = replay_optima(folder, trials, config.env, config.ddpg.scoring)
     result.replayed = replayed
@@ -243,6 +247,7 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     result.retention = pd.concat(curves, ignore_index=True)
     save("retention", retention_plot(result.retention))
     result.conditioning = conditioning_by_label(nodes)
+    result.holding = holding_table(folder, trials, config.env)
     edges = edges_no_longer_improving(trials, replayed)
     result.peaks_aggregations = peaks_under_both_aggregations(replayed, bins)
     for name, table in (
@@ -250,6 +255,7 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
         ("peaks_aggregations", result.peaks_aggregations),
         ("retention", result.retention),
         ("conditioning", result.conditioning),
+        ("holding", result.holding),
         ("edges_rescored", edges),
     ):
         path = out / f"{name}.csv"

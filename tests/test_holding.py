@@ -1,0 +1,131 @@
+"""The optima that hold their rods (lonlib.analysis.holding), on the committed one-cart LON."""
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lonlib.analysis import (
+    CHATTER_TOLERANT,
+    hold_measures,
+    holding_markdown,
+    holding_summary,
+    holding_table,
+    splice_holding,
+)
+from lonlib.analysis.holding import COLUMNS, README_BEGIN, README_END
+from lonlib.storage import named_config, read_experiment_trials
+from lonlib.task.behaviour import relabel
+from lonlib.task.pendulum import PendulumConfig
+from lonlib.task.rollout import Rollout, Trace
+
+ROOT = Path(__file__).resolve().parents[1]
+FOLDER = ROOT / "data" / "one-cart"
+ENV = named_config("one-cart").env
+
+
+@pytest.fixture(scope="module")
+def small_p():
+    """The holding table of the committed one-cart LON's p = 1e-4 (40 stored Actors
+    replayed), and its trials."""
+    trials = read_experiment_trials(FOLDER)
+    trials = trials[trials["p"] == 1e-4].reset_index(drop=True)
+    return holding_table(FOLDER, trials, ENV), trials
+
+
+def test_the_stored_holding_table_comes_back_from_the_stored_actors(small_p):
+    table, _ = small_p
+    stored = pd.read_csv(FOLDER / "figures" / "holding.csv")
+    stored = stored[stored["p"] == 1e-4].reset_index(drop=True)
+    pd.testing.assert_frame_equal(stored, table, check_dtype=False)
+
+
+def test_an_optimum_that_holds_scores_one_minus_its_swing_up(small_p):
+    table, trials = small_p
+    accepted = trials[trials["accepted"]]
+    assert len(table) == len(accepted)  # one row per accepted optimum, none of the rejected
+    held = table[table["holds"]]
+    assert 0 < len(held) < len(table)
+    assert (held["fitness"] == 1 - held["swing_up_steps"] / ENV.steps).all()  # exactly
+    assert (held["hold_angle_p90"] < ENV.upright_angle).all()
+    # an optimum that turns its rod over does not hold, whatever its fitness
+    assert not table.loc[table["label"] == "spinning", "holds"].any()
+    assert (table.loc[~table["holds"], "fitness"] < 0.9765).all()
+
+
+def test_the_best_optimum_holds_its_rod_within_a_few_hundredths_of_a_radian():
+    trials = read_experiment_trials(FOLDER)
+    best = trials[(trials["p"] == 1e-3) & (trials["run"] == 6) & (trials["index"] == 1)]
+    (row,) = holding_table(FOLDER, best, ENV).itertuples()
+    assert row.holds and row.fitness == 0.977 and row.swing_up_steps == 46
+    assert row.hold_angle_p90 < 0.05 and row.upright_speed > CHATTER_TOLERANT.balance_speed / 5
+
+
+def test_the_tolerant_labels_are_the_stored_descriptors_relabelled(small_p):
+    table, trials = small_p
+    accepted = trials[trials["accepted"]]
+    assert list(table["label"]) == list(accepted["label"]) == relabel(accepted)
+    assert list(table["label_chatter_tolerant"]) == relabel(accepted, CHATTER_TOLERANT)
+    assert list(table["label_chatter_tolerant"]) != list(table["label"])  # the chatter
+    fast = table["upright_speed"] >= CHATTER_TOLERANT.balance_speed
+    assert not (table.loc[fast, "label_chatter_tolerant"] == "balancing").any()
+
+
+def test_an_experiment_without_stored_actors_has_an_empty_table(tmp_path):
+    trials = read_experiment_trials(FOLDER)
+    table = holding_table(tmp_path, trials, ENV)
+    assert table.empty and "holds" in table.columns
+
+
+def test_the_summary_counts_the_holding_optima_per_p_larger_p_first():
+    table = pd.read_csv(FOLDER / "figures" / "holding.csv")
+    summary = holding_summary(table)
+    assert list(summary["p"]) == sorted(table["p"].unique(), reverse=True)
+    for row in summary.itertuples():
+        group = table[table["p"] == row.p]
+        assert row.accepted == len(group) and row.holding == int(group["holds"].sum())
+        top = group.loc[group["holds"], "fitness"].mode().max()
+        assert row.at_plateau == int((group.loc[group["holds"], "fitness"] == top).sum())
+    markdown = holding_markdown(summary)
+    assert markdown.count("\n|") == len(summary) + 1  # the header's rule and a row per p
+    assert r"of \|φ\| from step 400" in markdown  # pipes escaped in a cell
+
+
+def test_the_block_is_pasted_only_into_a_page_with_its_markers():
+    page = f"head\n{README_BEGIN}\nstale\n{README_END}\ntail\n"
+    pasted = splice_holding(page, "| new |", "data/x")
+    assert "| new |" in pasted and "stale" not in pasted and "`data/x`" in pasted
+    assert splice_holding("no markers here\n", "| new |", "data/x") == "no markers here\n"
+    assert holding_summary(pd.DataFrame(columns=list(COLUMNS))).empty
+
+
+def traced(phi: np.ndarray, end_step: list[int]) -> Rollout:
+    """A rollout of one rod per row with the angles ``phi [T, B]`` (0 upright)."""
+    t, b = phi.shape
+    phi = phi[:, :, None] % (2 * np.pi)
+    upright = np.abs(np.angle(np.exp(1j * phi))) < np.pi / 2
+    zeros = np.zeros((t, b, 1))
+    trace = Trace(zeros, zeros, phi, zeros, np.zeros((t, b, 10)), zeros, upright, zeros[..., 0])
+    none = np.zeros(b)
+    return Rollout(none, none, none, none.astype(np.int8), np.array(end_step), none, trace)
+
+
+def test_a_hold_lasts_from_the_first_upright_step_to_the_end_of_a_full_episode():
+    config = PendulumConfig(n_carts=1, steps=10)
+    down, up = np.pi, 0.1
+    phi = np.full((10, 5), down)
+    phi[3:, 0] = up  # upright from step 3 to the end: holds
+    phi[3:, 1], phi[6, 1] = up, 2.0  # falls past horizontal once: does not hold
+    phi[3:, 2] = up  # upright to its end, but the episode ended early (at step 8)
+    phi[:, 3] = -up  # upright from the start, on the other side of the vertical
+    hold_from = 5
+    holds, swing_up, p90 = hold_measures(traced(phi, [10, 10, 8, 10, 10]), config, hold_from)
+    assert list(holds) == [True, False, False, True, False]
+    assert list(swing_up) == [3, 3, 3, 0, -1]
+    np.testing.assert_allclose(p90[[0, 3, 4]], [up, up, np.pi])
+    assert p90[1] == pytest.approx(np.quantile([up, 2.0, up, up, up], 0.9))
+    _, _, late = hold_measures(traced(phi, [10, 10, 4, 10, 10]), config, hold_from)
+    assert np.isnan(late[2])  # ended before hold_from: nothing to measure
+    with pytest.raises(ValueError, match="trace=True"):
+        hold_measures(Rollout(*[np.zeros(1)] * 6), config)
