@@ -241,7 +241,8 @@ def _analyse(args: argparse.Namespace) -> None:
     root = experiment_folder(args.dir)
     readme = _markdown_page(args.docs)
     if readme is not None:  # refuse a page without the markers before any work
-        splice_summary(splice_readme(readme.read_text(), "", args.dir), "", args.dir)
+        text = splice_summary(splice_readme(readme.read_text(), "", args.dir), "", args.dir)
+        splice_holding(text, "", args.dir)
     if args.dry_run:
         return _dry_run_reader("analyse", root)
     result = analyse(
@@ -267,9 +268,8 @@ def _analyse(args: argparse.Namespace) -> None:
         text = splice_side_by_side(
             text, side_by_side_markdown(side) if not side.empty else "", args.dir
         )
-        if not result.holding.empty:
-            holding = holding_markdown(holding_summary(result.holding))
-            text = splice_holding(text, holding, args.dir)
+        holding = holding_markdown(holding_summary(result.holding))
+        text = splice_holding(text, holding, args.dir)
         readme.write_text(text, encoding="utf-8")
         print(f"summary and claims tables pasted into {readme}")
     return None

@@ -50,6 +50,7 @@ BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/storage/configs.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 STUDY = "lonlib/calibration/study.py"
+HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
     DDPG: [
@@ -84,6 +85,8 @@ GUARDS = {
     BEHAVIOUR: ["tests/test_behaviour.py", *ONE_ROLLOUT, "tests/test_calibration.py"],
     VERIFY: ["tests/test_verify.py"],
     STUDY: ["tests/test_study.py"],
+    HOLDING: ["tests/test_holding.py", "tests/test_verify.py"],
+    POWER: ["tests/test_claims_power.py"],
 }
 
 MUTANTS = [
@@ -808,6 +811,36 @@ MUTANTS = [
         "stored = read_optimum(optimum_path(folder, p, run, parent))",
         "stored = read_optimum(optimum_path(folder, p, run, max(parent - 1, 0)))",
         "verify rebuilds a start from another parent",
+    ),
+    Mutant(
+        HOLDING,
+        "all_up = trace.upright.all(axis=2)",
+        "all_up = trace.upright[:, :, 0]",
+        "holding: only the first rod must be upright",
+    ),
+    Mutant(
+        HOLDING,
+        "holds = full_length & (first >= 0) & stays",
+        "holds = (first >= 0) & stays",
+        "holding: an episode that ends early holds",
+    ),
+    Mutant(
+        HOLDING,
+        "eval_seed=scoring.eval_seed, ",
+        "",
+        "holding: rolled out from another start than the stored fitness's",
+    ),
+    Mutant(
+        HOLDING,
+        'accepted = trials[trials["accepted"].astype(bool)]',
+        "accepted = trials",
+        "holding: rejected optima measured as nodes",
+    ),
+    Mutant(
+        POWER,
+        "low = clopper_pearson(keys // (n + 2), keys % (n + 2), CONFIDENCE)[0][inverse]",
+        "low = clopper_pearson(keys // (n + 1), keys % (n + 1), CONFIDENCE)[0][inverse]",
+        "power: claim b's intervals of other pairs",
     ),
 ]
 

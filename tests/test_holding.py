@@ -14,7 +14,7 @@ from lonlib.analysis import (
     holding_table,
     splice_holding,
 )
-from lonlib.analysis.holding import COLUMNS, README_BEGIN, README_END
+from lonlib.analysis.holding import COLUMNS, NOT_COMPUTED, README_BEGIN, README_END
 from lonlib.storage import named_config, read_experiment_trials
 from lonlib.task.behaviour import relabel
 from lonlib.task.pendulum import PendulumConfig
@@ -26,25 +26,35 @@ ENV = named_config("one-cart").env
 
 
 @pytest.fixture(scope="module")
-def small_p():
-    """The holding table of the committed one-cart LON's p = 1e-4 (40 stored Actors
-    replayed), and its trials."""
+def whole():
+    """The holding table of the committed one-cart LON (every accepted optimum's stored
+    Actor replayed), and its trials."""
     trials = read_experiment_trials(FOLDER)
-    trials = trials[trials["p"] == 1e-4].reset_index(drop=True)
-    return holding_table(FOLDER, trials, ENV), trials
+    return holding_table(FOLDER, trials, ENV, named_config("one-cart").ddpg.scoring), trials
 
 
-def test_the_stored_holding_table_comes_back_from_the_stored_actors(small_p):
-    table, _ = small_p
+@pytest.fixture(scope="module")
+def small_p(whole):
+    """:func:`whole` at p = 1e-4."""
+    table, trials = whole
+    return (
+        table[table["p"] == 1e-4].reset_index(drop=True),
+        trials[trials["p"] == 1e-4].reset_index(drop=True),
+    )
+
+
+def test_the_stored_holding_table_comes_back_from_the_stored_actors(whole):
+    table, _ = whole
     stored = pd.read_csv(FOLDER / "figures" / "holding.csv")
-    stored = stored[stored["p"] == 1e-4].reset_index(drop=True)
     pd.testing.assert_frame_equal(stored, table, check_dtype=False)
 
 
-def test_an_optimum_that_holds_scores_one_minus_its_swing_up(small_p):
-    table, trials = small_p
+def test_an_optimum_that_holds_scores_one_minus_its_swing_up(whole):
+    table, trials = whole
     accepted = trials[trials["accepted"]]
-    assert len(table) == len(accepted)  # one row per accepted optimum, none of the rejected
+    assert len(table) == len(accepted) < len(trials)  # the accepted optima, no rejected one
+    keys = ["p", "run", "index"]
+    pd.testing.assert_frame_equal(table[keys], accepted[keys].reset_index(drop=True))
     held = table[table["holds"]]
     assert 0 < len(held) < len(table)
     assert (held["fitness"] == 1 - held["swing_up_steps"] / ENV.steps).all()  # exactly
@@ -76,6 +86,62 @@ def test_an_experiment_without_stored_actors_has_an_empty_table(tmp_path):
     trials = read_experiment_trials(FOLDER)
     table = holding_table(tmp_path, trials, ENV)
     assert table.empty and "holds" in table.columns
+    assert holding_markdown(holding_summary(table)) == NOT_COMPUTED
+
+
+@pytest.mark.parametrize("column", ["accepted", "label", "b_upright_speed_0", "b_end_reason"])
+def test_trials_without_what_the_table_reads_are_refused_naming_it(column):
+    trials = read_experiment_trials(FOLDER).drop(columns=column)
+    with pytest.raises(ValueError, match=f"needs the columns.*{column}"):
+        holding_table(FOLDER, trials, ENV)
+
+
+def test_an_optimum_without_a_descriptor_is_refused():
+    trials = read_experiment_trials(FOLDER).head(3).assign(b_end_reason=np.nan)
+    with pytest.raises(ValueError, match="no stored behaviour descriptor"):
+        holding_table(FOLDER, trials, ENV)
+
+
+def test_with_two_rods_the_fastest_rod_is_the_upright_speed():
+    reference = Path(ROOT / "data" / "reference")
+    trials = read_experiment_trials(reference)
+    trials = trials[trials["accepted"]].head(4)
+    env = named_config("reference").env
+    table = holding_table(reference, trials, env)
+    speeds = trials[["b_upright_speed_0", "b_upright_speed_1"]].to_numpy()
+    np.testing.assert_array_equal(table["upright_speed"], np.nanmax(speeds, axis=1))
+    assert not table["holds"].any()  # two-cart optima spin
+
+
+def test_the_summary_of_a_small_table():
+    table = pd.DataFrame(
+        {
+            "p": [1e-3, 1e-3, 1e-3, 1e-3, 1e-3, 1e-4, 1e-4],
+            "run": [0, 0, 1, 1, 2, 0, 0],
+            "fitness": [0.97, 0.97, 0.96, 0.96, 0.5, 0.9, 0.9],
+            "label": ["swinging high"] * 4 + ["spinning"] + ["balancing"] * 2,
+            "holds": [True, True, True, True, False, True, True],
+            "swing_up_steps": [60, 60, 80, 80, 10, 200, 200],
+            "hold_angle_p90": [0.1, 0.3, 0.2, 0.2, 2.0, 0.05, 0.05],
+            "upright_speed": [1.0, 2.0, 3.0, 3.0, 9.0, 0.1, 0.1],
+            "label_chatter_tolerant": ["balancing", "balancing", "swinging high"] * 1
+            + ["swinging high", "spinning"]
+            + ["balancing"] * 2,
+        }
+    )
+    big, small = holding_summary(table).to_dict("records")
+    assert (big["p"], big["accepted"], big["holding"], big["runs_holding"]) == (1e-3, 5, 4, 2)
+    assert (big["plateau_fitness"], big["at_plateau"]) == (0.97, 2)  # a tie: the higher
+    assert big["fitness"] == "0.9600–0.9700 (median 0.9650)"
+    assert big["hold_angle_p90"] == "0.1–0.3 (median 0.2)"
+    assert big["upright_speed"] == "1.00–3.00 (median 2.50)"
+    assert big["labels"] == "swinging high 4"
+    assert big["labels_chatter_tolerant"] == "balancing 2, swinging high 2"
+    assert (small["fitness"], small["swing_up_steps"], small["runs_holding"]) == (
+        "0.9000",
+        "200",
+        1,
+    )
 
 
 def test_the_summary_counts_the_holding_optima_per_p_larger_p_first():
@@ -101,12 +167,12 @@ def test_the_block_is_pasted_only_into_a_page_with_its_markers():
 
 
 def traced(phi: np.ndarray, end_step: list[int]) -> Rollout:
-    """A rollout of one rod per row with the angles ``phi [T, B]`` (0 upright)."""
-    t, b = phi.shape
-    phi = phi[:, :, None] % (2 * np.pi)
+    """A rollout with the rod angles ``phi [T, B]`` (one rod) or ``[T, B, n]`` (0 upright)."""
+    phi = (phi if phi.ndim == 3 else phi[:, :, None]) % (2 * np.pi)
+    t, b, n = phi.shape
     upright = np.abs(np.angle(np.exp(1j * phi))) < np.pi / 2
-    zeros = np.zeros((t, b, 1))
-    trace = Trace(zeros, zeros, phi, zeros, np.zeros((t, b, 10)), zeros, upright, zeros[..., 0])
+    zeros = np.zeros((t, b, n))
+    trace = Trace(zeros, zeros, phi, zeros, np.zeros((t, b, 10 * n)), zeros, upright, zeros[..., 0])
     none = np.zeros(b)
     return Rollout(none, none, none, none.astype(np.int8), np.array(end_step), none, trace)
 
@@ -129,3 +195,23 @@ def test_a_hold_lasts_from_the_first_upright_step_to_the_end_of_a_full_episode()
     assert np.isnan(late[2])  # ended before hold_from: nothing to measure
     with pytest.raises(ValueError, match="trace=True"):
         hold_measures(Rollout(*[np.zeros(1)] * 6), config)
+
+
+def test_an_early_end_leaves_its_last_steps_out_of_the_hold_angle():
+    config = PendulumConfig(n_carts=1, steps=10)
+    phi = np.zeros((10, 1))
+    phi[5:8, 0], phi[8:, 0] = 0.2, 1.4  # steps 8, 9 repeat a final state past the end
+    _, _, p90 = hold_measures(traced(phi, [8]), config, hold_from=5)
+    assert p90[0] == pytest.approx(0.2)
+
+
+def test_with_two_rods_every_rod_must_be_up_and_the_widest_angle_counts():
+    config = PendulumConfig(n_carts=2, steps=10)
+    phi = np.full((10, 2, 2), np.pi)
+    phi[2:, :, 0] = 0.1  # the first rod up from step 2 in both rows
+    phi[4:, :, 1] = -0.3  # the second from step 4
+    phi[7, 1, 1] = 2.5  # row 1's second rod falls once
+    holds, swing_up, p90 = hold_measures(traced(phi, [10, 10]), config, hold_from=5)
+    assert list(holds) == [True, False] and list(swing_up) == [4, 4]
+    assert p90[0] == pytest.approx(0.3)  # the second rod's angle, the wider one
+    assert p90[1] == pytest.approx(np.quantile([0.3, 0.3, 2.5, 0.3, 0.3], 0.9))

@@ -329,6 +329,9 @@ def test_analyse_rescores_with_the_replayed_robust_means_and_pastes_them(
         rescore_trials,
         side_by_side_markdown,
     )
+    from lonlib.analysis.holding import README_BEGIN as HOLDING_BEGIN
+    from lonlib.analysis.holding import README_END as HOLDING_END
+    from lonlib.analysis.holding import holding_markdown, holding_summary, holding_table
     from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
     from lonlib.analysis.summary import README_END as SUMMARY_END
 
@@ -347,7 +350,7 @@ def test_analyse_rescores_with_the_replayed_robust_means_and_pastes_them(
     page = tmp_path / "results.md"
     page.write_text(
         f"{SUMMARY_BEGIN}\n{SUMMARY_END}\n{CLAIMS_BEGIN}\n{CLAIMS_END}\n"
-        f"{README_BEGIN}\nold\n{README_END}\n"
+        f"{README_BEGIN}\nformer\n{README_END}\n{HOLDING_BEGIN}\nstale\n{HOLDING_END}\n"
     )
     cli_main(["analyse", str(out), "--docs", str(page)])
     figures = out / "figures"
@@ -365,4 +368,14 @@ def test_analyse_rescores_with_the_replayed_robust_means_and_pastes_them(
     assert list(side["verdict (nominal)"]) == list(nominal["verdict"])
     pasted = page.read_text()
     assert f"{side_by_side_markdown(side).strip()}\n{README_END}" in pasted
-    assert "old" not in pasted
+    assert "former" not in pasted
+    # the optima that hold: a row per accepted optimum, its block pasted from the CSV
+    holding = pd.read_csv(figures / "holding.csv")
+    assert len(holding) == int(trials["accepted"].sum()) > 0
+    assert f"{holding_markdown(holding_summary(holding)).strip()}\n{HOLDING_END}" in pasted
+    assert "stale" not in pasted
+    # replayed from the experiment's own nominal start (eval_seed 3, start noise 0.05)
+    config, _ = pipeline.load_experiment(out)
+    own = holding_table(out, trials, config.env, config.ddpg.scoring)
+    pd.testing.assert_frame_equal(holding, read_back(own))
+    assert not own.equals(holding_table(out, trials, config.env))  # eval_seed 0's start

@@ -26,11 +26,16 @@ from lonlib.analysis.summary import behaviour_counts
 from lonlib.storage.store import p_label
 from lonlib.task.behaviour import PREFIX, BehaviourThresholds, relabel
 from lonlib.task.pendulum import PendulumConfig
-from lonlib.task.rollout import Rollout, run_actors
+from lonlib.task.rollout import Rollout, Scoring, run_actors
 from lonlib.util.readme_tables import has_markers, splice_generated
 
 README_BEGIN = "<!-- holding:begin (lonlib analyse data/one-cart --docs docs/one-cart.md) -->"
 README_END = "<!-- holding:end -->"
+NOT_COMPUTED = (
+    "*Not computed: no accepted optimum with a stored Actor (`lonlib analyse` replays the "
+    "stored Actors to measure how they hold).*\n"
+)
+"""The block's text when there is nothing to measure."""
 
 HOLD_FROM_STEP = 400
 """The step from which :func:`holding_table` measures how far the rods wander
@@ -85,41 +90,70 @@ def hold_measures(
     return holds, first, p90
 
 
+NEEDED = ("p", "run", "index", "accepted", "fitness", "label", f"{PREFIX}end_reason")
+"""The trials columns :func:`holding_table` reads, besides each rod's descriptor."""
+
+
+def needed_columns(n_carts: int) -> list[str]:
+    """The trials columns :func:`holding_table` reads for ``n_carts`` rods: :data:`NEEDED`
+    and each rod's stored mean ``|phi_dot|`` while upright."""
+    return [*NEEDED, *(f"{PREFIX}upright_speed_{rod}" for rod in range(n_carts))]
+
+
 def holding_table(
     folder: str | Path,
     trials: pd.DataFrame,
     config: PendulumConfig,
+    scoring: Scoring = Scoring(),
     hold_from: int = HOLD_FROM_STEP,
     tolerant: BehaviourThresholds = CHATTER_TOLERANT,
+    batch: int = 32,
 ) -> pd.DataFrame:
     """One row per accepted optimum of ``trials`` whose Actor is stored in ``folder``
-    (columns :data:`COLUMNS`), all Actors rolled out as one batch from the fixed start:
-    ``holds`` (every rod upright from the first all-upright step to the end of a
-    full-length episode), ``swing_up_steps`` (the steps before that first all-upright
-    step, so a holding optimum's fitness is ``1 - swing_up_steps / steps``; -1 when no
-    step has every rod upright), ``hold_angle_p90`` (the 90th
+    (columns :data:`COLUMNS`), rolled out ``batch`` Actors at a time from the nominal start
+    of ``scoring`` (the start the stored fitness was scored from): ``holds`` (every rod
+    upright from the first all-upright step to the end of a full-length episode),
+    ``swing_up_steps`` (the steps before that first all-upright step, so that a holding
+    optimum's fitness is ``1 - swing_up_steps / steps`` under the "all rods upright"
+    aggregation, and with one rod under either; -1 when no step has every rod upright),
+    ``hold_angle_p90`` (the 90th
     percentile over the steps from ``hold_from`` of the largest rod angle from upright, in
     radians; NaN for an episode that ends before ``hold_from``), ``upright_speed`` (the
     stored descriptor's mean ``|phi_dot|`` while upright, the fastest rod), and the label
     under ``tolerant`` beside the stored one (:func:`hold_measures` says how the hold is
     measured)."""
+    speed_columns = [f"{PREFIX}upright_speed_{rod}" for rod in range(config.n_carts)]
+    missing = [c for c in needed_columns(config.n_carts) if c not in trials.columns]
+    if missing:
+        raise ValueError(f"trials: the holding table needs the columns {missing}")
     accepted = trials[trials["accepted"].astype(bool)]
     rows, thetas = stored_actors(Path(folder), accepted)
     if rows.empty:
         return pd.DataFrame(columns=list(COLUMNS))
-    holds, first, p90 = hold_measures(run_actors(thetas, config, trace=True), config, hold_from)
-    speeds = rows[[c for c in rows.columns if c.startswith(f"{PREFIX}upright_speed_")]]
+    if not rows[f"{PREFIX}end_reason"].map(lambda v: isinstance(v, str)).all():
+        raise ValueError("trials: an accepted optimum has no stored behaviour descriptor")
+    measures = [
+        hold_measures(
+            run_actors(
+                thetas[start : start + batch], config, eval_seed=scoring.eval_seed, trace=True
+            ),
+            config,
+            hold_from,
+        )
+        for start in range(0, len(rows), batch)
+    ]
+    holds, first, p90 = (np.concatenate(part) for part in zip(*measures, strict=True))
     return pd.DataFrame(
         {
             "p": rows["p"].to_numpy(),
             "run": rows["run"].to_numpy(),
             "index": rows["index"].to_numpy(),
             "fitness": rows["fitness"].to_numpy(),
-            "label": rows["label"].to_numpy() if "label" in rows else None,
+            "label": rows["label"].to_numpy(),
             "holds": holds,
             "swing_up_steps": first,
             "hold_angle_p90": p90,
-            "upright_speed": speeds.max(axis=1).to_numpy(),
+            "upright_speed": rows[speed_columns].max(axis=1).to_numpy(),
             "label_chatter_tolerant": relabel(rows, tolerant),
         },
         columns=list(COLUMNS),
@@ -132,7 +166,7 @@ def _span(values: pd.Series, fmt: str) -> str:
     if values.empty:
         return ""
     low, high, median = values.min(), values.max(), values.median()
-    if low == high:
+    if low == high:  # one value: no range, no median
         return format(low, fmt)
     return f"{low:{fmt}}–{high:{fmt}} (median {median:{fmt}})"
 
@@ -157,7 +191,7 @@ def holding_summary(table: pd.DataFrame) -> pd.DataFrame:
                 "plateau_fitness": float(top.max()) if len(top) else float("nan"),
                 "at_plateau": int((held["fitness"] == top.max()).sum()) if len(top) else 0,
                 "swing_up_steps": _span(held["swing_up_steps"], ".0f"),
-                "hold_angle_p90": _span(held["hold_angle_p90"], ".3f"),
+                "hold_angle_p90": _span(held["hold_angle_p90"], ".2g"),
                 "upright_speed": _span(held["upright_speed"], ".2f"),
                 "labels": behaviour_counts(held["label"]),
                 "labels_chatter_tolerant": behaviour_counts(held["label_chatter_tolerant"]),
@@ -167,7 +201,10 @@ def holding_summary(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def holding_markdown(summary: pd.DataFrame) -> str:
-    """:func:`holding_summary` as a Markdown table, one row per p."""
+    """:func:`holding_summary` as a Markdown table, one row per p; :data:`NOT_COMPUTED`
+    when it has no row."""
+    if summary.empty:
+        return NOT_COMPUTED
     table = pd.DataFrame(
         {
             "p": [p_label(p) for p in summary["p"]],
@@ -193,8 +230,9 @@ def holding_markdown(summary: pd.DataFrame) -> str:
 
 
 def splice_holding(readme: str, markdown: str, source: str) -> str:
-    """``readme`` with its holding block replaced by ``markdown`` under a line naming the
-    folder ``source``; a page without the markers is returned unchanged."""
+    """``readme`` with its holding block replaced by ``markdown`` (or :data:`NOT_COMPUTED`
+    when it is empty) under a line naming the folder ``source``; a page without the markers
+    is returned unchanged."""
     if not has_markers(readme, README_BEGIN):
         return readme
-    return splice_generated(readme, README_BEGIN, README_END, markdown, source)
+    return splice_generated(readme, README_BEGIN, README_END, markdown or NOT_COMPUTED, source)

@@ -34,7 +34,8 @@ from lonlib.analysis.conditioning import (
     retention_curve,
     stored_actors,
 )
-from lonlib.analysis.holding import holding_table
+from lonlib.analysis.holding import COLUMNS as HOLDING_COLUMNS
+from lonlib.analysis.holding import holding_table, needed_columns
 from lonlib.analysis.peaks import compare_with_paper, detect_peaks
 from lonlib.analysis.plots import (
     claim_d_curve_plot,
@@ -216,6 +217,14 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
         trials, replayed, result.claims, out, bins, fitness_tolerance
     )
     result.files += files
+    described = set(needed_columns(config.env.n_carts)) <= set(trials.columns)
+    result.holding = (  # empty without stored Actors or behaviour descriptors
+        holding_table(folder, trials, config.env, config.ddpg.scoring)
+        if described
+        else pd.DataFrame(columns=list(HOLDING_COLUMNS))
+    )
+    result.holding.to_csv(out / "holding.csv", index=False)
+    result.files.append(out / "holding.csv")
     if replayed.empty:
         return
     nodes = replayed[replayed["accepted"]]
@@ -247,7 +256,6 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     result.retention = pd.concat(curves, ignore_index=True)
     save("retention", retention_plot(result.retention))
     result.conditioning = conditioning_by_label(nodes)
-    result.holding = holding_table(folder, trials, config.env)
     edges = edges_no_longer_improving(trials, replayed)
     result.peaks_aggregations = peaks_under_both_aggregations(replayed, bins)
     for name, table in (
@@ -255,7 +263,6 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
         ("peaks_aggregations", result.peaks_aggregations),
         ("retention", result.retention),
         ("conditioning", result.conditioning),
-        ("holding", result.holding),
         ("edges_rescored", edges),
     ):
         path = out / f"{name}.csv"
