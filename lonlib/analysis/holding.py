@@ -24,7 +24,7 @@ from lonlib.analysis.claims_report import markdown_table
 from lonlib.analysis.conditioning import stored_actors
 from lonlib.analysis.summary import behaviour_counts
 from lonlib.storage.store import p_label
-from lonlib.task.behaviour import PREFIX, BehaviourThresholds, relabel
+from lonlib.task.behaviour import PREFIX, BehaviourThresholds, descriptors_of, label
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.rollout import Rollout, Scoring, run_actors
 from lonlib.util.readme_tables import has_markers, splice_generated
@@ -130,7 +130,8 @@ def holding_table(
     rows, thetas = stored_actors(Path(folder), accepted)
     if rows.empty:
         return pd.DataFrame(columns=list(COLUMNS))
-    if not rows[f"{PREFIX}end_reason"].map(lambda v: isinstance(v, str)).all():
+    descriptors = descriptors_of(rows)
+    if any(d is None for d in descriptors):
         raise ValueError("trials: an accepted optimum has no stored behaviour descriptor")
     measures = [
         hold_measures(
@@ -154,7 +155,7 @@ def holding_table(
             "swing_up_steps": first,
             "hold_angle_p90": p90,
             "upright_speed": rows[speed_columns].max(axis=1).to_numpy(),
-            "label_chatter_tolerant": relabel(rows, tolerant),
+            "label_chatter_tolerant": [label(d, tolerant) for d in descriptors],
         },
         columns=list(COLUMNS),
     )
