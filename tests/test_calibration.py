@@ -395,3 +395,13 @@ def test_readme_gets_the_grids_table_between_its_own_markers(tiny_study, tmp_pat
     assert cells.strip() in text
     assert "| integrator | steps |" not in text  # the drift table: the default grid's block only
     assert text.endswith("<!-- calibration-tiny:end -->\noutro\n")
+
+
+def test_a_velocity_cell_with_another_gain_is_its_own_cell_and_physics():
+    # the geometry sweep's slower motor (issue 46): gain 0.5 on the velocity motor
+    slow = Cell("velocity", "semi-implicit", motor_gain=0.5)
+    default = Cell("velocity", "semi-implicit")
+    assert default.name == "velocity-tau0.02_semi-implicit_height"  # stored names unchanged
+    assert slow.name == "velocity-tau0.02-gain0.5_semi-implicit_height"
+    assert slow.env(PendulumConfig()).motor_gain == 0.5
+    assert default.env(PendulumConfig(motor_gain=3.0)).motor_gain == 1.0

@@ -43,8 +43,11 @@ def search_table(records: list[dict[str, Any]]) -> pd.DataFrame:
         for search in record["searches"]:
             # cells stored before the start angle was a cell setting start hanging
             row = {"cell": record["name"], "initial_angle": math.pi, **record["cell"]}
-            # only the velocity motor has a time constant, only the others a gain
-            row["motor_gain" if row["motor"] == "velocity" else "motor_tau"] = np.nan
+            # only the velocity motor has a time constant; its gain shows only when not 1
+            if row["motor"] != "velocity":
+                row["motor_tau"] = np.nan
+            elif row.get("motor_gain", 1.0) == 1.0:
+                row["motor_gain"] = np.nan
             if "continue_from" in row:  # empty (none) reads back from a CSV as NaN
                 row["continue_from"] = row["continue_from"] or np.nan
             row.update({k: v for k, v in search.items() if not k.startswith("history_")})
@@ -320,11 +323,12 @@ def calibration_markdown(cells: pd.DataFrame, drift: pd.DataFrame) -> str:
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for _, row in cells.iterrows():
-        motor = (
-            f"velocity, τ = {row['motor_tau']:g} s"
-            if row["motor"] == "velocity"
-            else f"{row['motor']} × {row['motor_gain']:g}"
-        )
+        if row["motor"] != "velocity":
+            motor = f"{row['motor']} × {row['motor_gain']:g}"
+        elif pd.isna(row["motor_gain"]):
+            motor = f"velocity, τ = {row['motor_tau']:g} s"
+        else:
+            motor = f"velocity × {row['motor_gain']:g}, τ = {row['motor_tau']:g} s"
         end = "survives" if row["best_end_reason"] == "step_limit" else row["best_end_reason"]
         start = re.search(r"_(upright-start|start[^_]+)", str(row["cell"]))
         kinds = [start.group(1)] if start else []

@@ -153,17 +153,18 @@ class StartSpread:
 
 @dataclass(frozen=True)
 class Cell:
-    """One physics setting of the grid. ``motor_gain`` matters for the force [N per unit of
-    command] and acceleration [m/s^2 per unit] motors, ``motor_tau`` [s] for the velocity
-    motor (its gain stays 1: the command range is the +-2 m/s of the velocity sensors)."""
+    """One physics setting of the grid. ``motor_gain`` scales every motor's command: N per
+    unit for the force motor, m/s^2 for the acceleration motor, m/s for the velocity motor
+    (1 by default: the command range is the +-2 m/s of the velocity sensors; 0.5 a slower
+    motor of +-1 m/s); ``motor_tau`` [s] is the velocity motor's lag."""
 
     motor: str = "velocity"
     """Motor model of the carts: ``force``, ``acceleration`` or ``velocity``."""
     integrator: str = "semi-implicit"
     """Integrator of the physics: ``euler`` or ``semi-implicit``."""
     motor_gain: float = 1.0
-    """Force [N] or acceleration [m/s^2] per unit of command; unused (1) by the velocity
-    motor."""
+    """Force [N], acceleration [m/s^2] or target speed [m/s] per unit of command (name
+    suffix ``-gain<g>`` on a velocity motor whose gain is not 1)."""
     motor_tau: float = 0.02
     """Time constant [s] of the velocity motor's response to its command."""
     reward: str = "height"
@@ -194,11 +195,12 @@ class Cell:
     def name(self) -> str:
         """File-safe, readable name, e.g. ``velocity-tau0.02_semi-implicit_height``
         (``_upright-start``, ``_explore``, ``_continue`` appended for those kinds)."""
-        motor = (
-            f"velocity-tau{self.motor_tau:g}"
-            if self.motor == "velocity"
-            else f"{self.motor}-gain{self.motor_gain:g}"
-        )
+        if self.motor != "velocity":
+            motor = f"{self.motor}-gain{self.motor_gain:g}"
+        elif self.motor_gain == 1.0:  # the name cells stored before the gain was a setting keep
+            motor = f"velocity-tau{self.motor_tau:g}"
+        else:
+            motor = f"velocity-tau{self.motor_tau:g}-gain{self.motor_gain:g}"
         kinds = "_explore" * self.exploring_starts + "_continue" * bool(self.continue_from)
         return f"{motor}_{self.integrator}_{self.reward}{self.start_suffix}{kinds}"
 
@@ -224,7 +226,7 @@ class Cell:
             base,
             motor=self.motor,
             integrator=self.integrator,
-            motor_gain=1.0 if self.motor == "velocity" else self.motor_gain,
+            motor_gain=self.motor_gain,
             motor_tau=self.motor_tau,
             reward=self.reward,
             initial_angle=self.initial_angle,
