@@ -130,6 +130,7 @@ from enum import IntEnum
 
 import numpy as np
 
+from lonlib.task import compiled
 from lonlib.util import portable_math
 from lonlib.util.validation import check_choice, check_field_types, check_keys, check_range
 
@@ -498,8 +499,22 @@ class CoupledPendulums:
         return out
 
     def observe(self) -> FloatArray:
-        """Normalised Table I sensors of every environment, ``[B, 10 n]``."""
-        return sensors(self.config, self.x, self.x_dot, self.phi, self.phi_dot)
+        """Normalised Table I sensors of every environment, ``[B, 10 n]`` (compiled when
+        :mod:`lonlib.task.compiled` can, else :func:`sensors`; the same bits)."""
+        module = compiled.kernels()
+        if module is None:
+            return sensors(self.config, self.x, self.x_dot, self.phi, self.phi_dot)
+        out = np.empty((self.batch_size, SENSORS_PER_CART * self.config.n_carts))
+        fc, ic = compiled.pack(self.config)
+        module.observe_batch(fc, ic, *self._state_arrays(), out)
+        return out
+
+    def _state_arrays(self) -> tuple[np.ndarray, ...]:
+        """x, x_dot, phi, phi_dot as C-contiguous float64 arrays (what the kernels take)."""
+        return tuple(
+            np.ascontiguousarray(a, dtype=np.float64)
+            for a in (self.x, self.x_dot, self.phi, self.phi_dot)
+        )
 
     # ------------------------------------------------------------------ dynamics
     def _accelerations(
@@ -529,12 +544,40 @@ class CoupledPendulums:
         """Advance every running environment by one control step of ``dt`` seconds.
 
         ``actions``: ``[B, n]`` actor outputs in [0, 1] (clipped). Returns rewards, fitness
-        increments and end flags; ended environments do not move and earn nothing.
+        increments and end flags; ended environments do not move and earn nothing. Compiled
+        when :mod:`lonlib.task.compiled` can, else the numpy definition below; the same bits.
         """
-        cfg = self.config
         actions = np.asarray(actions, dtype=np.float64)
         if actions.shape != self.x.shape:
             raise ValueError(f"actions must have shape {self.x.shape}, got {actions.shape}")
+        module = compiled.kernels()
+        if module is None:
+            return self._step_numpy(actions)
+        batch, n = self.x.shape
+        x, x_dot, phi, phi_dot = (a.copy() for a in self._state_arrays())
+        step_count = self.step_count.astype(np.int64, copy=True)
+        sums = np.stack([self.upright_sum, self.upright_all_sum, self.upright_mean_sum], axis=1)
+        end_reason = self.end_reason.astype(np.int8, copy=True)
+        reward, upright = np.empty(batch), np.empty(batch)
+        upright_each = np.empty((batch, n), dtype=bool)
+        terminated, truncated = np.empty(batch, dtype=bool), np.empty(batch, dtype=bool)
+        reported = np.empty(batch, dtype=np.int8)
+        fc, ic = compiled.pack(self.config)
+        module.step_batch(
+            fc, ic, x, x_dot, phi, phi_dot, step_count, sums, end_reason,
+            np.ascontiguousarray(actions), reward, upright, upright_each, terminated,
+            truncated, reported,
+        )  # fmt: skip
+        self.x, self.x_dot, self.phi, self.phi_dot = x, x_dot, phi, phi_dot
+        self.step_count, self.end_reason = step_count, end_reason
+        self.upright_sum, self.upright_all_sum, self.upright_mean_sum = (
+            np.ascontiguousarray(sums[:, i]) for i in range(3)
+        )
+        return StepResult(reward, upright, upright_each, terminated, truncated, reported)
+
+    def _step_numpy(self, actions: FloatArray) -> StepResult:
+        """:meth:`step`'s numpy definition (the oracle of the compiled kernel)."""
+        cfg = self.config
         running = ~self.done
         drive = -cfg.motor_gain * motor_command(actions)
         h = cfg.dt / cfg.substeps

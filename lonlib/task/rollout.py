@@ -28,11 +28,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from lonlib.task import compiled
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
-from lonlib.task.policy import actor_spec, forward_numpy
+from lonlib.task.policy import NetSpec, actor_spec, forward_numpy
 from lonlib.util.validation import check_choice, check_field_types, check_range
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -135,9 +137,12 @@ def run_policy(
         raise ValueError(f"offsets must have shape [4, B, {config.n_carts}], got {offsets.shape}")
     sim = CoupledPendulums(config, offsets.shape[1])
     sim.reset(noise=offsets)
+    kept_rows = sim.batch_size if trace is True else int(trace)
+    module = compiled.kernels() if isinstance(policy, ActorPolicy) else None
+    if module is not None:
+        return _run_compiled(module, policy, sim, min(kept_rows, sim.batch_size))
     episode_return = np.zeros(sim.batch_size)
     steps: list[tuple[np.ndarray, ...]] = []
-    kept_rows = sim.batch_size if trace is True else int(trace)
     while not sim.done.all():
         observation = sim.observe()
         actions = np.asarray(policy(observation), dtype=np.float64)
@@ -171,7 +176,49 @@ def run_policy(
     )
 
 
-def actor_policy(thetas: np.ndarray, config: PendulumConfig) -> Policy:
+def _run_compiled(module: Any, policy: ActorPolicy, sim: CoupledPendulums, kept: int) -> Rollout:
+    """:func:`run_policy` of flat Actors on the compiled kernels (the same bits)."""
+    batch = sim.batch_size
+    thetas = np.ascontiguousarray(np.atleast_2d(policy.thetas), dtype=np.float64)
+    if thetas.shape[0] not in (1, batch):
+        raise ValueError(f"{thetas.shape[0]} Actors for {batch} starts: give one or one per start")
+    which = np.arange(batch) if thetas.shape[0] == batch else np.zeros(batch, dtype=np.int64)
+    fc, ic = compiled.pack(sim.config)
+    sizes = np.array(policy.spec.sizes, dtype=np.int64)
+    out = module.rollout_actors(fc, ic, sizes, thetas, which, sim._state_arrays(), kept)
+    steps = sim.config.steps
+    kept_trace = None
+    if kept:
+        kept_trace = Trace(
+            *(out[name] for name in ("x", "x_dot", "phi", "phi_dot", "sensors", "actions")),
+            upright=out["upright"],
+            fitness=out["fitness"],
+        )
+    sums = out["sums"]
+    return Rollout(
+        fitness=sums[:, 0] / steps,
+        fitness_all=sums[:, 1] / steps,
+        fitness_mean=sums[:, 2] / steps,
+        end_reason=out["end_reason"],
+        end_step=out["end_step"],
+        episode_return=out["episode_return"],
+        trace=kept_trace,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ActorPolicy:
+    """The greedy policy of flat Actors (:func:`actor_policy`): a callable on sensors, which
+    :func:`run_policy` runs on the compiled kernels."""
+
+    spec: NetSpec
+    thetas: np.ndarray  # [P] shared by every row, or [B, P] one per row
+
+    def __call__(self, observation: np.ndarray) -> np.ndarray:
+        return forward_numpy(self.spec, self.thetas, observation)
+
+
+def actor_policy(thetas: np.ndarray, config: PendulumConfig) -> ActorPolicy:
     """The greedy policy of flat Actors ``[B, P]`` (row ``b`` acts with Actor ``b``) or of one
     Actor ``[P]`` shared by every row; validated (shape, finite) before any compute."""
     spec = actor_spec(config.n_carts)
@@ -183,7 +230,7 @@ def actor_policy(thetas: np.ndarray, config: PendulumConfig) -> Policy:
         )
     if not np.isfinite(thetas).all():
         raise ValueError("Actor parameters contain NaN or infinite values")
-    return lambda observation: forward_numpy(spec, thetas, observation)
+    return ActorPolicy(spec, thetas)
 
 
 def run_actors(

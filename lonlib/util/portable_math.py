@@ -24,24 +24,24 @@ import numpy as np
 __all__ = ["cos", "exp", "sigmoid", "sin", "sin_cos"]
 
 # exp: x = k ln2 + r, |r| <= ln2 / 2; ln2 split so that k * LN2_HI is exact for |k| < 2^11.
-_LN2_HI = 6.93147180369123816490e-01
-_LN2_LO = 1.90821492927058770002e-10
-_INV_LN2 = 1.44269504088896338700e00
-_EXP_LIMIT = 708.0  # beyond, the result is clamped: exp(+-708) is finite in float64
+LN2_HI = 6.93147180369123816490e-01
+LN2_LO = 1.90821492927058770002e-10
+INV_LN2 = 1.44269504088896338700e00
+EXP_LIMIT = 708.0  # beyond, the result is clamped: exp(+-708) is finite in float64
 # Taylor coefficients 1/k! for k = 2..13 (ascending): on |r| <= 0.347 the tail is
 # below 1e-17 relative.
-_EXP_COEFFS = tuple(1.0 / math.factorial(k) for k in range(2, 14))
+EXP_COEFFS = tuple(1.0 / math.factorial(k) for k in range(2, 14))
 
 # sin/cos: x = n pi/2 + r, |r| <= pi/4; pi/2 split into three 33-bit parts and a tail
 # (Cody-Waite with fdlibm's values), so n * part is exact for |n| < 2^20.
-_TWO_OVER_PI = 6.36619772367581382433e-01
-_PIO2_1 = 1.57079632673412561417e00
-_PIO2_2 = 6.07710050630396597660e-11
-_PIO2_3 = 2.02226624871116645580e-21
-_PIO2_3T = 8.47842766036889956997e-32
-_SIN_LIMIT = 1.0e5  # Cody-Waite reduction is exact enough far beyond the angles used here
+TWO_OVER_PI = 6.36619772367581382433e-01
+PIO2_1 = 1.57079632673412561417e00
+PIO2_2 = 6.07710050630396597660e-11
+PIO2_3 = 2.02226624871116645580e-21
+PIO2_3T = 8.47842766036889956997e-32
+SIN_LIMIT = 1.0e5  # Cody-Waite reduction is exact enough far beyond the angles used here
 # fdlibm __kernel_sin / __kernel_cos coefficients.
-_S = (
+S = (
     -1.66666666666666324348e-01,
     8.33333333332248946124e-03,
     -1.98412698298579493134e-04,
@@ -49,7 +49,7 @@ _S = (
     -2.50507602534068634195e-08,
     1.58969099521155010221e-10,
 )
-_C = (
+C = (
     4.16666666666666019037e-02,
     -1.38888888888741095749e-03,
     2.48015872894767294178e-05,
@@ -70,11 +70,11 @@ def _horner(z: np.ndarray, coeffs: tuple[float, ...]) -> np.ndarray:
 
 def exp(x: np.ndarray) -> np.ndarray:
     """``e**x`` in float64 (inputs clamped to [-708, 708]; NaN stays NaN)."""
-    x = np.clip(np.asarray(x, dtype=np.float64), -_EXP_LIMIT, _EXP_LIMIT)
-    k = np.rint(x * _INV_LN2)
-    r = (x - k * _LN2_HI) - k * _LN2_LO
+    x = np.clip(np.asarray(x, dtype=np.float64), -EXP_LIMIT, EXP_LIMIT)
+    k = np.rint(x * INV_LN2)
+    r = (x - k * LN2_HI) - k * LN2_LO
     # 1 + r + r^2 (1/2! + r (1/3! + ...)): the polynomial from 1/13! down to 1/2!
-    p = _horner(r, _EXP_COEFFS)
+    p = _horner(r, EXP_COEFFS)
     p = p * (r * r)
     p = p + r
     p = p + 1.0
@@ -83,23 +83,23 @@ def exp(x: np.ndarray) -> np.ndarray:
 
 def _kernel_sin(r: np.ndarray) -> np.ndarray:
     z = r * r
-    poly = _horner(z, _S)
+    poly = _horner(z, S)
     return r + (r * z) * poly
 
 
 def _kernel_cos(r: np.ndarray) -> np.ndarray:
     z = r * r
-    poly = _horner(z, _C)
+    poly = _horner(z, C)
     return (1.0 - 0.5 * z) + (z * z) * poly
 
 
 def sin_cos(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(sin x, cos x)`` in float64 for ``|x| <= 1e5`` (one shared range reduction)."""
     x = np.asarray(x, dtype=np.float64)
-    if np.any(np.abs(x) > _SIN_LIMIT):
-        raise ValueError(f"sin/cos arguments must lie within +-{_SIN_LIMIT:g}")
-    n = np.rint(x * _TWO_OVER_PI)
-    r = (((x - n * _PIO2_1) - n * _PIO2_2) - n * _PIO2_3) - n * _PIO2_3T
+    if np.any(np.abs(x) > SIN_LIMIT):
+        raise ValueError(f"sin/cos arguments must lie within +-{SIN_LIMIT:g}")
+    n = np.rint(x * TWO_OVER_PI)
+    r = (((x - n * PIO2_1) - n * PIO2_2) - n * PIO2_3) - n * PIO2_3T
     s, c = _kernel_sin(r), _kernel_cos(r)
     quadrant = np.nan_to_num(n).astype(np.int64) & 3
     sin = np.where(quadrant == 0, s, np.where(quadrant == 1, c, np.where(quadrant == 2, -s, -c)))
