@@ -177,7 +177,9 @@ def load_hold_config(spec: str | Path | None) -> HoldTestConfig:
         return HoldTestConfig()
     from lonlib.util.validation import read_yaml_mapping
 
-    return HoldTestConfig.from_mapping(read_yaml_mapping(Path(spec), "hold test"))
+    values = read_yaml_mapping(Path(spec), "hold test")
+    values.pop("name")  # the file's stem: a hold test is named by its folder
+    return HoldTestConfig.from_mapping(values)
 
 
 @dataclass(frozen=True)
@@ -237,11 +239,12 @@ def load_control(config: HoldTestConfig, seed_index: int) -> tuple[np.ndarray, n
 
 def fit_critic(
     theta: np.ndarray, omega: np.ndarray, env: PendulumConfig, hp: DDPGConfig, steps: int, seed: int
-) -> tuple[np.ndarray, float]:
+) -> tuple[np.ndarray, bool]:
     """Fit a Critic to the frozen Actor ``theta``: DDPG (``hp``: buffer, batch, noise, learning
     rate, gamma, tau, warm-up) for ``steps`` env steps, every Actor update undone after each
-    step (acting and the Critic's targets use ``theta`` throughout). Returns the Critic and
-    the greedy fitness of the Actor at the stop (``theta``'s, a check that it stayed frozen)."""
+    step (acting and the Critic's targets use ``theta`` throughout; the Critic's update comes
+    before the Actor's in a step). Returns the Critic and whether the learner's Actor is
+    ``theta`` again at the end (a check that it stayed frozen)."""
     fit = dataclasses.replace(
         hp,
         max_steps=steps,
@@ -258,7 +261,8 @@ def fit_critic(
             result = finished
         trainer.learner.actor_params.copy_(frozen)
     assert result is not None
-    return result.omega.astype(np.float32), float(result.fitness)
+    unchanged = bool(np.array_equal(trainer.learner.actor_flat()[0], theta))
+    return result.omega.astype(np.float32), unchanged
 
 
 def held(last: list[float], config: HoldTestConfig) -> bool | None:
@@ -331,7 +335,7 @@ class HoldTest:
                 return data["omega"]
         c = self.config
         clock = time.perf_counter()
-        omega, fitness = fit_critic(
+        omega, unchanged = fit_critic(
             load_actor(c.actor),
             fresh_critic(c, 2, 0),
             PendulumConfig(),
@@ -340,12 +344,12 @@ class HoldTest:
             search_seeds(c, SearchSpec("fitted", c.perturbations[0], 0))[1] ^ 1,
         )
         buffer = io.BytesIO()
-        np.savez(buffer, omega=omega, actor_fitness=np.float64(fitness))
+        np.savez(buffer, omega=omega, actor_unchanged=np.bool_(unchanged))
         atomic_write(path, buffer.getvalue())
         if progress:
             print(
                 f"{time.strftime('%H:%M:%S')} critic fitted ({c.critic_fit_steps} env steps, "
-                f"{time.perf_counter() - clock:.0f} s, frozen Actor scores {fitness:.4f})",
+                f"{time.perf_counter() - clock:.0f} s, Actor unchanged: {unchanged})",
                 file=sys.stderr,
                 flush=True,
             )
