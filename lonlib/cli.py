@@ -347,6 +347,53 @@ def _calibrate(args: argparse.Namespace) -> None:
     print(f"tables and figure written to {args.out}")
 
 
+def _imitate(args: argparse.Namespace) -> None:
+    from lonlib.calibration.imitation import ImitationConfig, imitate, write_imitation
+
+    values = {"seed": args.seed}
+    for name in ("teacher", "rounds", "updates"):
+        if getattr(args, name) is not None:
+            values[name] = getattr(args, name)
+    config = ImitationConfig(**values)
+    if args.dry_run:
+        print(
+            f"dry run: imitation of {config.teacher} (seed {config.seed}, {config.rounds} "
+            f"DAgger rounds) into {args.out}. Nothing computed or written."
+        )
+        return
+    result = imitate(config, progress=not args.quiet)
+    path = write_imitation(args.out, result, config)
+    print(f"two-cart Actor of round {result.round} scores {result.fitness:.4f}; written to {path}")
+
+
+def _hold_test(args: argparse.Namespace) -> None:
+    from lonlib.calibration.hold import HoldTest, load_hold_config, plan
+
+    check_range("--checkpoint-minutes", args.checkpoint_minutes, 0.0, 1e7)
+    config = load_hold_config(args.config).with_overrides(args.seeds, args.max_steps, args.batch)
+    test = HoldTest(config, args.out)
+    if args.dry_run:
+        state = _check_output_folder(Path(args.out))
+        print(
+            f"dry run: hold test, {len(plan(config))} searches ({', '.join(config.arms)} x "
+            f"p {', '.join(f'{p:g}' for p in config.perturbations)} x {config.seeds} seeds, "
+            f"<= {config.ddpg.max_steps} env steps each); output {args.out} ({state}). "
+            "Nothing computed or written."
+        )
+        return
+    summary, done = test.run(
+        drain_after_seconds=None if args.drain_after is None else args.drain_after * 60,
+        checkpoint_seconds=args.checkpoint_minutes * 60,
+        progress=not args.quiet,
+    )
+    with pd.option_context("display.width", 200, "display.max_columns", 30):
+        print(summary.to_string(index=False))
+    print(
+        f"hold test {'finished' if done else 'not finished (run the same command to continue)'}"
+        f"; tables in {args.out}"
+    )
+
+
 class DeprecatedFlag(argparse.Action):
     """An option's old spelling: stores to the new one and says so on stderr."""
 
@@ -518,6 +565,46 @@ def build_parser() -> argparse.ArgumentParser:
         "so far (at least one), naming the cells not finished yet",
     )
     calibrate.set_defaults(func=_calibrate)
+
+    imitate = sub.add_parser(
+        "imitate",
+        help="build the two-cart balancing Actor of the hold test by imitation (DAgger) of a "
+        "one-cart optimum copied to both carts, into OUT (actor.npy, actor.json)",
+    )
+    imitate.add_argument("out", metavar="OUT", help="output folder")
+    imitate.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    imitate.add_argument("--teacher", help="one-cart optimum .npz (default: the committed one)")
+    imitate.add_argument("--rounds", type=int, help="DAgger rounds (override)")
+    imitate.add_argument("--updates", type=int, help="Adam steps per round (override)")
+    imitate.add_argument("--quiet", action="store_true", help="no progress lines")
+    imitate.set_defaults(func=_imitate)
+
+    hold = sub.add_parser(
+        "hold-test",
+        help="run (or resume) the hold test into OUT: DDPG local searches from a balancing "
+        "Actor perturbed at each p, three arms (docs/study-geometry.md)",
+    )
+    hold.add_argument("out", metavar="OUT", help="output folder")
+    hold.add_argument("--config", help="YAML file of hold-test settings (default: the built-in)")
+    hold.add_argument("--seeds", type=int, help="seeds per arm and p (override)")
+    hold.add_argument("--max-steps", type=int, help="env steps per search at most (override)")
+    hold.add_argument("--batch", type=int, help="DDPG minibatch size (override)")
+    hold.add_argument(
+        "--checkpoint-minutes",
+        type=float,
+        default=10.0,
+        help="write the search in flight this often, to resume mid-search after a kill "
+        "(0: never; default 10)",
+    )
+    hold.add_argument(
+        "--drain-after",
+        type=float,
+        metavar="MINUTES",
+        help="after this many minutes start no new search, finish and store the one in "
+        "flight, and exit; the same command again continues",
+    )
+    hold.add_argument("--quiet", action="store_true", help="no progress lines")
+    hold.set_defaults(func=_hold_test)
     for name, verb in sub.choices.items():
         verb.add_argument(
             "--dry-run",
