@@ -4,10 +4,11 @@ import os
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from benchmarks import ddpg, lockstep, lon, simulator  # noqa: E402
+from benchmarks import ddpg, lockstep, lon, rollout, simulator  # noqa: E402
 
 if __name__ == "__main__":
     lon.main()
     simulator.main()
+    rollout.main()
     ddpg.main()
     lockstep.main()

@@ -67,6 +67,7 @@ from lonlib.ddpg.streams import (
     CounterStreams,
 )
 from lonlib.storage.configs import DDPGConfig, check_judging, without_default_judging
+from lonlib.task import compiled
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
 from lonlib.task.policy import NetSpec, actor_spec, critic_spec
 from lonlib.task.rollout import Scoring, score_actors
@@ -324,6 +325,9 @@ class SlotTrainer:
         self.env_config, self.hp, self.n = env_config, hp, env_config.n_carts
         self.a_spec, self.c_spec = actor_spec(self.n), critic_spec(self.n)
         torch.set_num_threads(hp.threads)  # the thread count can change float reductions
+        # the greedy rollouts between updates use the same cores (their rows in parallel;
+        # each row's bits do not depend on it), never more than torch's
+        compiled.set_threads(hp.threads)
         self.device = torch.device(device)
 
     def _allocate_slots(self, k: int) -> None:

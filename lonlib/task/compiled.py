@@ -116,6 +116,7 @@ def _load(required: bool) -> ModuleType | None:
             numba.config.CACHE_DIR = str(folder)
         from lonlib.task import kernels as module
 
+        numba.set_num_threads(1)  # set_threads spreads rows wider where asked
         module.warm_up()
         return module
     except Exception as error:  # numba missing, or a kernel failing to compile
