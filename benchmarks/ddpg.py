@@ -19,7 +19,9 @@ import torch
 
 from benchmarks.common import RESULTS, report
 from lonlib.ddpg.lean import learner_class
-from lonlib.ddpg.trainer import DDPGConfig, ReplayBuffer, local_search
+from lonlib.ddpg.replay import ReplayBuffer
+from lonlib.ddpg.trainer import local_search
+from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 

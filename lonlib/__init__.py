@@ -13,9 +13,7 @@ _pin()
 
 from lonlib.task.env import ENV_ID, register_envs  # noqa: E402
 from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig  # noqa: E402
-from lonlib.task.rollout import Rollout, evaluate  # noqa: E402
-
-Evaluation = Rollout  # the name ``evaluate`` returned before the one rollout
+from lonlib.task.rollout import evaluate  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -25,7 +23,6 @@ __all__ = [
     "ENV_ID",
     "CoupledPendulums",
     "EndReason",
-    "Evaluation",
     "PendulumConfig",
     "__version__",
     "evaluate",

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.storage.atomic import check_output_place
+from lonlib.storage.atomic import CorruptDataError, DataWriteError, check_output_place
 from lonlib.storage.configs import EXECUTORS, NAMED_CONFIGS
+from lonlib.storage.layout import p_label
 from lonlib.storage.manifest import CHANGEABLE_FIELDS
-from lonlib.storage.store import CorruptDataError, DataWriteError, p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
 
@@ -81,7 +81,8 @@ def _check_output_folder(out: Path) -> str:
 
 
 def _run(args: argparse.Namespace) -> None:
-    from lonlib.experiment.running import load_config, pending_runs, run_experiment
+    from lonlib.experiment.running import pending_runs, run_experiment
+    from lonlib.storage.configs import load_config
 
     config = load_config(args.config)
     changes: dict = {}
@@ -173,14 +174,15 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
 
 def _dry_run_reader(verb: str, root: Path) -> None:
     """``--dry-run`` of a verb that reads an experiment: the folder holds one."""
-    from lonlib.storage.store import read_manifest
+    from lonlib.storage.layout import read_manifest
 
     name = read_manifest(root)["config"].get("name", "?")
     print(f"dry run: lonlib {verb} would read the experiment {name!r} in {root}. Nothing done.")
 
 
 def _status(args: argparse.Namespace) -> None:
-    from lonlib.experiment.running import run_status, status
+    from lonlib.experiment.running import status
+    from lonlib.storage.status import run_status
 
     root = experiment_folder(args.dir)
     if args.dry_run:
@@ -210,7 +212,7 @@ def _lon(args: argparse.Namespace) -> None:
     from lonlib.lon.graphs import build_lon, cmlon
     from lonlib.lon.io import to_graphml, to_trace
     from lonlib.lon.metrics import metrics_table
-    from lonlib.storage.store import read_finished_trials
+    from lonlib.storage.trials import read_finished_trials
 
     root = experiment_folder(args.dir)
     if args.dry_run:

@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from lonlib.ddpg.search_interface import ddpg_local_search
-from lonlib.ddpg.trainer import DDPGConfig
 from lonlib.search.algorithm import (
     BasinHoppingConfig,
     LocalOptimum,
@@ -13,6 +12,7 @@ from lonlib.search.algorithm import (
     basin_hopping_steps,
     trial_seeds,
 )
+from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 

@@ -1,5 +1,5 @@
-"""The paper's claims on synthetic experiment folders written with lonlib.storage.store: every claim
-can come out reproduced, contradicted, inconclusive and not testable, the tests point the
+"""The paper's claims on synthetic experiment folders written with lonlib.storage.trials: every
+claim can come out reproduced, contradicted, inconclusive and not testable, the tests point the
 right way, the table renders, and the analysis-only command leaves the stored runs as they
 were."""
 
@@ -38,9 +38,10 @@ from lonlib.analysis.effect_size import bootstrap_delta_ci, cliffs_delta, compar
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import README_END as SUMMARY_END
 from lonlib.analysis.summary import experiment_summary, summary_markdown
-from lonlib.experiment.running import ExperimentConfig
 from lonlib.search.algorithm import Trial
-from lonlib.storage.store import read_experiment_trials, save_step, write_json
+from lonlib.storage.atomic import write_json
+from lonlib.storage.configs import ExperimentConfig
+from lonlib.storage.trials import read_experiment_trials, save_step
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -60,7 +61,7 @@ def descriptor(key: int) -> dict:
 
 
 def write_experiment(folder: Path, runs, labels="run", descriptors=None):
-    """An experiment folder as lonlib.storage.store writes it: per p, one run per chain of accepted
+    """An experiment folder as lonlib.storage.trials writes it: per p, one run per chain of accepted
     fitness levels after a start at a fitness unique to the run, then two rejected trials.
     ``labels``: ``"run"`` (a behaviour label unique to each run), ``"level"`` (one label per
     fitness level, shared across runs) or None (no label). ``descriptors``: None (no

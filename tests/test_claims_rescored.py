@@ -17,7 +17,7 @@ from lonlib.analysis.claims_rescored import (
     splice_side_by_side,
     write_robust_claims,
 )
-from lonlib.storage.store import read_experiment_trials
+from lonlib.storage.trials import read_experiment_trials
 from tests.test_claims import PAPER_LIKE, WORSE, verdicts, write_experiment
 
 

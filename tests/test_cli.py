@@ -11,8 +11,9 @@ from pathlib import Path
 import pytest
 
 from lonlib.cli import build_parser, main
-from lonlib.experiment.running import load_config, run_experiment
-from lonlib.storage.store import DataWriteError
+from lonlib.experiment.running import run_experiment
+from lonlib.storage.atomic import DataWriteError
+from lonlib.storage.configs import load_config
 
 READERS = ["status", "lon", "analyse", "record", "verify", "thin"]
 # What reStructuredText or Sphinx markup looks like in a help text.
@@ -180,8 +181,9 @@ def test_a_manifest_of_another_shape_is_refused_as_corrupt(verb, text, tmp_path,
 
 
 def test_a_manifest_of_another_shape_is_refused_by_the_store(tmp_path):
+    from lonlib.storage.atomic import CorruptDataError
+    from lonlib.storage.layout import read_manifest
     from lonlib.storage.manifest import sessions_with_other_result_path, updated_manifest
-    from lonlib.storage.store import CorruptDataError, read_manifest
 
     (tmp_path / "manifest.json").write_text("[1, 2]")
     for read in (read_manifest, sessions_with_other_result_path):

@@ -17,8 +17,7 @@ import yaml
 from hypothesis import HealthCheck, example, given, reject, settings
 from hypothesis import strategies as st
 
-from lonlib.ddpg.trainer import DDPGConfig
-from lonlib.experiment.running import ExperimentConfig, load_config
+from lonlib.storage.configs import DDPGConfig, ExperimentConfig, load_config
 from lonlib.task.pendulum import PendulumConfig
 
 SECTIONS = {None: ExperimentConfig, "env": PendulumConfig, "ddpg": DDPGConfig}

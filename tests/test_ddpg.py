@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 import torch
 
+from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import EXPLORATION_NOISE, CounterStreams
 from lonlib.ddpg.trainer import (
-    DDPGConfig,
-    ReplayBuffer,
     SlotTrainer,
     exploration_actions,
     is_improvement,
     local_search,
     local_search_batch,
 )
+from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import PendulumConfig, StepResult
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 from lonlib.task.rollout import evaluate, score_actors

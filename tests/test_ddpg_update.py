@@ -6,7 +6,8 @@ import torch
 
 from lonlib.ddpg.lean import LeanDDPG, learner_class
 from lonlib.ddpg.reference import AutogradDDPG
-from lonlib.ddpg.trainer import DDPGConfig, local_search_batch
+from lonlib.ddpg.trainer import local_search_batch
+from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 

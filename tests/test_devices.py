@@ -33,7 +33,8 @@ from lonlib.ddpg.lean import LeanDDPG
 from lonlib.ddpg.plain_state import TensorReader
 from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import EXPLORATION_NOISE, REPLAY_SAMPLES, WARMUP_ACTIONS, CounterStreams
-from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_device, exploration_actions
+from lonlib.ddpg.trainer import SlotTrainer, check_device, exploration_actions
+from lonlib.storage.configs import DDPGConfig
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 

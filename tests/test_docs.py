@@ -32,7 +32,7 @@ from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import splice_summary, summary_markdown
 from lonlib.calibration.report import DRIFT_HEADER, README_BEGIN, README_END
 from lonlib.cli import build_parser, main
-from lonlib.storage.store import read_experiment_trials
+from lonlib.storage.trials import read_experiment_trials
 from lonlib.util.readme_tables import has_markers, splice_generated
 
 ROOT = Path(__file__).parents[1]
@@ -350,26 +350,17 @@ def documented_names() -> list[tuple[str, str]]:
     return sorted(found)
 
 
-# The names of before the subpackages (lonlib/basin_hopping.py, ...): importable shims that
-# the docs must not name.
-MOVED = {
-    path.stem
-    for path in (ROOT / "lonlib").glob("*.py")
-    if path.read_text().lstrip('"').startswith("Moved to ")
-}
-
-
 def resolves(name: str) -> bool:
     """Whether ``name`` is an importable module, or an attribute chain of the longest
-    importable module prefix of it, and names no moved module."""
+    importable module prefix of it (a module of this tree under its own name, not an alias)."""
     parts = name.split(".")
-    if parts[1] in MOVED:
-        return False
     for i in range(len(parts), 0, -1):
         try:
             found = importlib.import_module(".".join(parts[:i]))
         except ImportError:
             continue
+        if found.__name__ != ".".join(parts[:i]):
+            return False
         for attribute in parts[i:]:
             if not hasattr(found, attribute):
                 return False
@@ -390,8 +381,7 @@ def test_the_name_check_sees_the_docs_names_and_fails_on_an_old_path():
     assert _code("a (`lonlib.result_path.\nexperiment_digest`) b") == [
         "lonlib.result_path.experiment_digest"
     ]
-    assert {"basin_hopping", "store", "manifest", "result_path", "cpu_kernels"} <= MOVED
-    assert not resolves("lonlib.basin_hopping")  # importable, but the old name
+    assert not resolves("lonlib.basin_hopping")  # the old name, removed
     assert not resolves("lonlib.result_path.experiment_digest")
     assert not resolves("lonlib.storage.no_such_function")
     assert not resolves("lonlib.calibration.study.run_calibration")

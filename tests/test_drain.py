@@ -16,17 +16,13 @@ from tqdm import tqdm
 
 import lonlib.experiment.lockstep
 from lonlib.cli import main
-from lonlib.experiment.checkpoints import inflight_checkpoints
 from lonlib.experiment.lockstep import run_lockstep
-from lonlib.experiment.running import (
-    _refresh,
-    hold_runs,
-    load_config,
-    pending_runs,
-    run_experiment,
-    run_status,
-)
-from lonlib.storage.store import read_experiment_trials
+from lonlib.experiment.running import _refresh, pending_runs, run_experiment
+from lonlib.experiment.runs import hold_runs
+from lonlib.storage.configs import load_config
+from lonlib.storage.inflight import inflight_checkpoints
+from lonlib.storage.status import run_status
+from lonlib.storage.trials import read_experiment_trials
 from tests.conftest import write_tiny_yaml
 
 

@@ -12,21 +12,11 @@ import pandas as pd
 import pytest
 
 from lonlib.cli import main as cli_main
-from lonlib.experiment.running import (
-    ExperimentConfig,
-    load_config,
-    named_config,
-    run_experiment,
-    status,
-)
-from lonlib.storage.store import (
-    CorruptDataError,
-    history_path,
-    optimum_path,
-    read_optimum,
-    read_trials,
-    trials_path,
-)
+from lonlib.experiment.running import run_experiment, status
+from lonlib.storage.atomic import CorruptDataError
+from lonlib.storage.configs import ExperimentConfig, load_config, named_config
+from lonlib.storage.layout import history_path, optimum_path, trials_path
+from lonlib.storage.trials import read_optimum, read_trials
 from lonlib.task.behaviour import LABELS, describe, descriptors_of
 from tests.conftest import write_tiny_yaml
 
@@ -238,7 +228,7 @@ def test_a_killed_pool_worker_is_retried_and_its_run_resumes(longer_searches, tm
 
 
 def test_a_trials_table_from_an_older_lonlib_is_named_as_such(tmp_path):
-    from lonlib.storage.store import read_trials
+    from lonlib.storage.trials import read_trials
 
     old = tmp_path / "trials.parquet"
     columns = ["p", "run", "index", "parent", "fitness", "accepted", "seconds", "env_steps"]
@@ -321,7 +311,7 @@ def test_a_budget_below_a_stored_run_is_refused_naming_the_field_and_that_run(re
 
 def test_a_run_stored_past_its_end_is_refused_and_verify_names_it(reference, tmp_path):
     from lonlib.analysis.verify import algorithm_findings
-    from lonlib.storage.store import read_experiment_trials
+    from lonlib.storage.trials import read_experiment_trials
 
     config, out, trials = reference
     copy = _truncated_copy(out, tmp_path, keep=4)
@@ -374,7 +364,7 @@ def test_a_budget_change_is_refused_while_another_process_samples(reference, tmp
 
 
 def test_an_empty_trials_table_ends_no_run_early(reference, tmp_path):
-    from lonlib.storage import runs_ending_early
+    from lonlib.storage.trials import runs_ending_early
 
     config, out, trials = reference
     copy = _truncated_copy(out, tmp_path, keep=4, longer={(1e-4, 1): 0})

@@ -23,24 +23,12 @@ import pytest
 import yaml
 
 import lonlib
-from lonlib.experiment.running import (
-    check_worker_sees_folder,
-    load_config,
-    run_experiment,
-    status,
-)
+from lonlib.experiment.running import check_worker_sees_folder, run_experiment, status
+from lonlib.storage.atomic import CorruptDataError, DataWriteError, read_json
+from lonlib.storage.configs import load_config
+from lonlib.storage.layout import optimum_path, run_dir, trials_path
 from lonlib.storage.lock import LockHeld, exclusive_lock
-from lonlib.storage.store import (
-    CorruptDataError,
-    DataWriteError,
-    load_run_state,
-    optimum_path,
-    read_experiment_trials,
-    read_json,
-    read_optimum,
-    run_dir,
-    trials_path,
-)
+from lonlib.storage.trials import load_run_state, read_experiment_trials, read_optimum
 from tests.conftest import write_tiny_yaml
 
 COMPARED = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps"]

@@ -6,15 +6,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.analysis import (
-    CHATTER_TOLERANT,
+from lonlib.analysis import CHATTER_TOLERANT, holding_markdown, holding_summary
+from lonlib.analysis.holding import (
+    COLUMNS,
+    NOT_COMPUTED,
+    README_BEGIN,
+    README_END,
     hold_measures,
-    holding_markdown,
-    holding_summary,
     holding_table,
     splice_holding,
 )
-from lonlib.analysis.holding import COLUMNS, NOT_COMPUTED, README_BEGIN, README_END
 from lonlib.storage import named_config, read_experiment_trials
 from lonlib.task.behaviour import relabel
 from lonlib.task.pendulum import PendulumConfig

@@ -20,20 +20,19 @@ import torch
 import lonlib
 from lonlib.ddpg.trainer import JUDGE_BATCH, SlotTrainer
 from lonlib.experiment.checkpoints import (
-    FORMAT,
-    OtherSettings,
     StoredBatch,
     check_settings,
-    inflight_checkpoints,
     load_inflight,
-    new_checkpoint_path,
     read_inflight,
     remove_inflight,
     remove_leftovers,
     save_inflight,
     split_inflight,
 )
-from lonlib.experiment.running import experiment_plan, run_experiment, run_status
+from lonlib.experiment.running import run_experiment
+from lonlib.experiment.runs import experiment_plan
+from lonlib.storage.inflight import FORMAT, OtherSettings, inflight_checkpoints, new_checkpoint_path
+from lonlib.storage.status import run_status
 from lonlib.task.policy import actor_spec, critic_spec
 from tests.test_lockstep import CONFIG, SMALL, serial, small_killed, stored
 
@@ -977,7 +976,8 @@ def test_a_checkpoint_of_another_format_is_refused_saying_what_to_do(
 
 MOVED = """
 import json, sys
-from lonlib.experiment.checkpoints import inflight_checkpoints, load_inflight
+from lonlib.experiment.checkpoints import load_inflight
+from lonlib.storage.inflight import inflight_checkpoints
 import lonlib
 assert lonlib.__file__.startswith(sys.argv[2]), lonlib.__file__
 assert "lonlib.ddpg.trainer" not in sys.modules and "lonlib.trainers_moved" in sys.modules

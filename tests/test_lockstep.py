@@ -9,9 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.ddpg.trainer import DDPGConfig
-from lonlib.experiment.running import ExperimentConfig, run_experiment, run_one, run_status, status
-from lonlib.storage.store import read_experiment_trials
+from lonlib.experiment.running import run_experiment, run_one, status
+from lonlib.storage.configs import DDPGConfig, ExperimentConfig
+from lonlib.storage.status import run_status
+from lonlib.storage.trials import read_experiment_trials
 from lonlib.task.pendulum import PendulumConfig
 from tests.conftest import built_once
 
@@ -181,7 +182,7 @@ def test_cli_runs_the_lockstep_executor(tmp_path, capsys):
 
 
 def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, monkeypatch, capfd):
-    from lonlib.experiment.checkpoints import inflight_checkpoints
+    from lonlib.storage.inflight import inflight_checkpoints
 
     # Killed in one process, resumed in two: its checkpoint is split, one part per process.
     killed_after_checkpoints(monkeypatch, tmp_path, CONFIG, slots=4, writes=100)
@@ -198,8 +199,8 @@ def test_lockstep_in_two_processes_gives_the_serial_trials(serial, tmp_path, mon
 def test_processes_are_dealt_out_again_when_one_runs_out_of_runs(
     serial_two_runs, tmp_path, caplog, capfd
 ):
-    from lonlib.experiment.checkpoints import inflight_checkpoints
     from lonlib.experiment.lockstep_workers import run_lockstep_processes
+    from lonlib.storage.inflight import inflight_checkpoints
 
     # The second process's one run has ended already, so it is idle at once while the first
     # trains a batch of two searches: the first stops after writing its checkpoint, which a
@@ -236,7 +237,7 @@ def test_a_batch_that_cannot_write_its_checkpoint_keeps_its_searches(
 ):
     import lonlib.experiment.lockstep
     from lonlib.experiment.lockstep import run_lockstep
-    from lonlib.storage.store import DataWriteError
+    from lonlib.storage.atomic import DataWriteError
 
     def disk_full(*_args, **_kwargs):
         raise DataWriteError("no space left on device (test)")
@@ -306,7 +307,7 @@ def test_a_lockstep_batch_killed_mid_search_resumes_from_its_checkpoint(
     serial, tmp_path, monkeypatch, caplog, device_mode
 ):
     import lonlib.experiment.checkpoints
-    from lonlib.experiment.checkpoints import inflight_checkpoints
+    from lonlib.storage.inflight import inflight_checkpoints
 
     writes = []
     write = lonlib.experiment.checkpoints.atomic_write
@@ -354,7 +355,8 @@ def test_a_checkpoint_continues_only_the_slots_whose_runs_did_not_go_on(
 ):
     import json
 
-    from lonlib.experiment.checkpoints import inflight_checkpoints, load_inflight, save_inflight
+    from lonlib.experiment.checkpoints import load_inflight, save_inflight
+    from lonlib.storage.inflight import inflight_checkpoints
 
     small_killed(tmp_path)
     (checkpoint,) = inflight_checkpoints(tmp_path)
@@ -396,7 +398,7 @@ def fake_checkpoint(out, runs, trials):
     """Metadata of a checkpoint (no data file): enough for dealing runs and removing it."""
     import json
 
-    from lonlib.experiment.checkpoints import FORMAT
+    from lonlib.storage.inflight import FORMAT
 
     folder = out / ".inflight"
     folder.mkdir(exist_ok=True)
@@ -422,7 +424,8 @@ def test_processes_resume_the_checkpoints_of_their_runs(tmp_path):
 def test_a_checkpoint_split_over_processes_continues_each_part_exactly(
     serial, tmp_path, monkeypatch, caplog
 ):
-    from lonlib.experiment.checkpoints import inflight_checkpoints, split_inflight
+    from lonlib.experiment.checkpoints import split_inflight
+    from lonlib.storage.inflight import inflight_checkpoints
 
     killed_after_checkpoints(monkeypatch, tmp_path, CONFIG, slots=8, writes=120)
     (whole,) = inflight_checkpoints(tmp_path)
@@ -476,8 +479,8 @@ def test_a_subset_of_a_batch_continues_its_searches_exactly(device_mode):
 
 
 def test_a_live_batchs_checkpoint_is_never_removed_as_ended(tmp_path):
-    from lonlib.experiment.checkpoints import checkpoint_lock_path, inflight_checkpoints
     from lonlib.experiment.running import remove_finished_checkpoints
+    from lonlib.storage.inflight import checkpoint_lock_path, inflight_checkpoints
     from lonlib.storage.lock import exclusive_lock
 
     folder = fake_checkpoint(tmp_path, runs=[[0.001, 0]], trials=[3])

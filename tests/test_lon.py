@@ -2,7 +2,6 @@
 
 import warnings
 
-import networkx as nx
 import pandas as pd
 import pytest
 
@@ -263,9 +262,3 @@ def test_worsening_rows_leave_their_target_unaccepted(tmp_path):
     assert not lon.nodes["r"]["accepted"] and not lon.nodes["r"]["sink"]
     assert lon.nodes["b"]["accepted"] and lon.graph["run_ends"] == {"1": "b"}
     assert set(mlon(lon)) == {"a", "b"}
-
-
-def test_the_old_keyword_tolerance_still_works_with_a_deprecation_warning():
-    with pytest.warns(DeprecationWarning, match="fitness_tolerance"):
-        old = build_lon(HAND, tolerance=1e-9)
-    assert nx.utils.graphs_equal(old, build_lon(HAND, fitness_tolerance=1e-9))

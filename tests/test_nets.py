@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from lonlib.ddpg.nets import BatchedMLP, actor_spec, critic_spec, forward_numpy
+from lonlib.ddpg.nets import BatchedMLP
+from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 
 
 def test_paper_parameter_count_for_two_carts():

@@ -125,7 +125,7 @@ def test_notebooks_share_one_data_folder_from_the_root_and_from_notebooks(tmp_pa
 def test_a_missing_experiment_says_so_and_what_to_run(tmp_path, capsys):
     from lonlib.analysis.pipeline import load_experiment
     from lonlib.cli import main
-    from lonlib.storage.store import MissingExperimentError
+    from lonlib.storage.atomic import MissingExperimentError
 
     folder = tmp_path / "data" / "quick"
     with pytest.raises(MissingExperimentError, match="no experiment in .*`make reproduce`"):

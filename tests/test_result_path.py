@@ -1,5 +1,6 @@
-"""The result path's golden test (lonlib.result_path) and what each session records about
-where its results came from (lonlib.manifest, lonlib.provenance, lonlib.cpu_kernels)."""
+"""The result path's golden test (lonlib.storage.result_path) and what each session records
+about where its results came from (lonlib.storage.manifest, lonlib.storage.provenance,
+lonlib.util.cpu_kernels)."""
 
 import dataclasses
 import json
@@ -12,22 +13,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.configs import ExperimentConfig, named_config
-from lonlib.cpu_kernels import (
+from lonlib.ddpg import DDPGConfig
+from lonlib.experiment import run_experiment
+from lonlib.storage.atomic import read_json
+from lonlib.storage.configs import ExperimentConfig, named_config
+from lonlib.storage.manifest import (
+    capability_change,
+    manifest_path,
+    sessions_with_other_result_path,
+)
+from lonlib.storage.result_path import RESULT_PATH_VERSION, experiment_digest
+from lonlib.util.cpu_kernels import (
     CpuKernelWarning,
     expected_torch_capability,
     torch_cpu_capability,
     unpinned_message,
 )
-from lonlib.ddpg import DDPGConfig
-from lonlib.experiment import run_experiment
-from lonlib.manifest import (
-    capability_change,
-    manifest_path,
-    sessions_with_other_result_path,
-)
-from lonlib.result_path import RESULT_PATH_VERSION, experiment_digest
-from lonlib.store import read_json
 
 REPO = Path(__file__).resolve().parent.parent
 CPU_FEATURES = np._core._multiarray_umath.__cpu_features__  # numpy >= 2
@@ -37,7 +38,7 @@ CPU_FEATURES = np._core._multiarray_umath.__cpu_features__  # numpy >= 2
 GOLDEN_DIGEST = "d220c666201d45141efa4a63c93fcae83967e921936249105c33f3798f934b1b"
 BUMP = (
     "if this change is intended to alter results, bump RESULT_PATH_VERSION "
-    "(lonlib/result_path.py) and update the golden hash (GOLDEN_DIGEST in "
+    "(lonlib/storage/result_path.py) and update the golden hash (GOLDEN_DIGEST in "
     "tests/test_result_path.py)"
 )
 
@@ -103,9 +104,9 @@ def test_the_reference_experiment_replays_bit_for_bit_under_the_pinned_kernels()
     "1", parted at episode 4). Skipped where the committed reference was sampled by another
     result-path version than this code's."""
     pinned_kernels_or_skip()
-    from lonlib.basin_hopping import BasinHoppingRun
     from lonlib.ddpg import local_search
-    from lonlib.experiment import initial_parameters
+    from lonlib.experiment.runs import initial_parameters
+    from lonlib.search.algorithm import BasinHoppingRun
 
     out = REPO / "data" / "reference"
     first = out / "p=0.001" / "run_0000" / "history_0000.parquet"

@@ -245,7 +245,7 @@ def test_every_entry_point_scores_from_the_same_noisy_start():
     import tempfile
 
     from lonlib.analysis.recordings import record, recording_properties
-    from lonlib.ddpg.trainer import DDPGConfig
+    from lonlib.storage.configs import DDPGConfig
     from lonlib.task.rollout import actor_policy, evaluate
 
     config = PendulumConfig(steps=300, initial_angle=0.3, initial_noise=0.2)
@@ -266,7 +266,7 @@ def test_every_entry_point_scores_from_the_same_noisy_start():
 
 @pytest.mark.parametrize("field", ["seed", "eval_seed"])
 def test_negative_seeds_are_refused_by_name(field):
-    from lonlib.ddpg.trainer import DDPGConfig
+    from lonlib.storage.configs import DDPGConfig
 
     with pytest.raises(ValueError, match="seed"):
         Scoring(**{field: -1})

@@ -1,5 +1,5 @@
 """The experiment summary (lonlib.analysis.summary) on a synthetic folder written with
-lonlib.storage.store:
+lonlib.storage.trials:
 every count is the stored trials', finished runs follow Algorithm 2's tolerance, and the
 README block is generated between its own markers."""
 
@@ -18,10 +18,13 @@ from lonlib.analysis.summary import (
     splice_summary,
     summary_markdown,
 )
-from lonlib.experiment.checkpoints import FORMAT
-from lonlib.experiment.running import ExperimentConfig, run_status, status
+from lonlib.experiment.running import status
 from lonlib.search.algorithm import Trial
-from lonlib.storage.store import read_experiment_trials, save_step, write_json
+from lonlib.storage.atomic import write_json
+from lonlib.storage.configs import ExperimentConfig
+from lonlib.storage.inflight import FORMAT
+from lonlib.storage.status import run_status
+from lonlib.storage.trials import read_experiment_trials, save_step
 
 # (fitness, accepted, improved on its start, label) per trial; tolerance 2 ends a run after
 # two rejections in a row.

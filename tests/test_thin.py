@@ -10,8 +10,9 @@ import pytest
 
 from lonlib.analysis.verify import verify_experiment
 from lonlib.cli import main
-from lonlib.storage import HISTORY_GLOB, thin_histories, thinned_history
+from lonlib.storage import thin_histories
 from lonlib.storage.atomic import MissingExperimentError
+from lonlib.storage.thin import HISTORY_GLOB, thinned_history
 
 
 def test_a_thinned_history_keeps_the_judged_rows_and_the_last_in_order():

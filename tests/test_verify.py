@@ -11,7 +11,7 @@ import pytest
 
 from lonlib.analysis.verify import verify_experiment
 from lonlib.cli import main as cli_main
-from lonlib.storage.store import optimum_path, trials_path
+from lonlib.storage.layout import optimum_path, trials_path
 
 
 def test_a_fresh_experiment_replays_every_stored_number(tiny_experiment, capsys):
@@ -108,7 +108,7 @@ def test_an_experiment_of_another_result_path_is_not_extended(damaged):
     import dataclasses
 
     from lonlib.experiment.running import run_experiment
-    from lonlib.storage.store import read_manifest
+    from lonlib.storage.layout import read_manifest
 
     folder, _ = damaged
     manifest = folder / "manifest.json"
@@ -159,7 +159,8 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
 @pytest.fixture(scope="module")
 def robust_experiment(tmp_path_factory):
     """The tiny experiment under fitness_estimate robust, with start noise and other seeds."""
-    from lonlib.experiment.running import load_config, run_experiment
+    from lonlib.experiment.running import run_experiment
+    from lonlib.storage.configs import load_config
     from tests.conftest import write_tiny_yaml
 
     folder = tmp_path_factory.mktemp("robust")
@@ -217,7 +218,8 @@ def test_a_robust_fitness_changed_by_a_rounding_is_an_error(robust_experiment, t
 
 def test_a_recording_of_another_episode_is_an_error(damaged):
     from lonlib.analysis.recordings import record
-    from lonlib.storage.store import read_manifest, read_optimum
+    from lonlib.storage.layout import read_manifest
+    from lonlib.storage.trials import read_optimum
 
     folder, trials = damaged
     from lonlib.storage.configs import ExperimentConfig

@@ -74,8 +74,8 @@ from lonlib.lon.behaviour import behavioural_lon
 from lonlib.lon.behaviour_space import behaviour_node_curve, behaviour_nodes
 from lonlib.lon.graphs import build_lon, mlon, sinks
 from lonlib.lon.metrics import node_metrics
-from lonlib.storage.store import p_label, read_finished_trials
-from lonlib.util.deprecation import renamed_keyword
+from lonlib.storage.layout import p_label
+from lonlib.storage.trials import read_finished_trials
 
 REPRODUCED = "reproduced"
 CONTRADICTED = "contradicted"
@@ -237,7 +237,6 @@ class Landscape:
         return any(label for _, label in self.graph.nodes(data="label", default=""))
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def landscapes(trials: pd.DataFrame, fitness_tolerance: float = 1e-9) -> dict[float, Landscape]:
     """One :class:`Landscape` per stored p, in increasing p."""
     out = {}
@@ -670,7 +669,6 @@ def claim_gap(land: Landscape) -> Claim:
     )
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def claims_from_trials(
     trials: pd.DataFrame,
     bins: int = 50,
@@ -691,7 +689,6 @@ def claims_from_trials(
     return pd.DataFrame([asdict(row) for row in rows])
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def peaks_beside_paper(
     trials: pd.DataFrame, bins: int = 50, fitness_tolerance: float = 1e-9
 ) -> pd.DataFrame:
@@ -709,7 +706,6 @@ def peaks_beside_paper(
     return pd.concat(tables, ignore_index=True)
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def paper_claims(
     folder,
     bins: int = 50,

@@ -23,7 +23,7 @@ import pandas as pd
 from lonlib.analysis.claims_report import markdown_table
 from lonlib.analysis.conditioning import stored_actors
 from lonlib.analysis.summary import behaviour_counts
-from lonlib.storage.store import p_label
+from lonlib.storage.layout import p_label
 from lonlib.task.behaviour import PREFIX, BehaviourThresholds, descriptors_of, label
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.rollout import Rollout, Scoring, run_actors

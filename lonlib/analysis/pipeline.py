@@ -46,7 +46,6 @@ from lonlib.analysis.plots import (
     optima_boxplot,
     retention_plot,
     save_html,
-    save_png,
     sensitivity,
 )
 from lonlib.analysis.recordings import record, recording_name
@@ -55,15 +54,10 @@ from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
 from lonlib.lon.metrics import lon_metrics
 from lonlib.storage.configs import ExperimentConfig
-from lonlib.storage.store import (
-    optimum_path,
-    p_label,
-    read_finished_trials,
-    read_manifest,
-    read_optimum,
-)
+from lonlib.storage.layout import optimum_path, p_label, read_manifest
+from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
-from lonlib.util.deprecation import renamed_keyword
+from lonlib.util.figures import save_png
 from lonlib.util.validation import check_range
 
 
@@ -100,7 +94,6 @@ class Analysis:
     holding: pd.DataFrame = field(default_factory=pd.DataFrame)  # the optima that hold their rods
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def analyse(
     folder: str | Path,
     seed: int = 0,
@@ -293,7 +286,6 @@ def behaviour_hover(trials: pd.DataFrame) -> dict[str, str]:
     return out
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def optima_to_record(
     trials: pd.DataFrame, bins: int = 50, fitness_tolerance: float = 1e-9
 ) -> pd.DataFrame:

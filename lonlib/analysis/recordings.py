@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lonlib.storage.store import p_label
+from lonlib.storage.layout import p_label
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.rollout import Rollout, Scoring, run_actors
 

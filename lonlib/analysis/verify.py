@@ -40,8 +40,10 @@ import numpy as np
 import pandas as pd
 
 from lonlib.search.algorithm import RunState, Trial, random_parameters, search_start
+from lonlib.storage.atomic import CorruptDataError
+from lonlib.storage.layout import optimum_path, read_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
-from lonlib.storage.store import CorruptDataError, optimum_path, read_manifest, read_optimum
+from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
 from lonlib.task.policy import actor_spec
 from lonlib.task.rollout import score_actors

@@ -15,7 +15,7 @@ from lonlib.calibration.study import (
     read_cell,
     run_and_store_cell,
 )
-from lonlib.storage.store import atomic_write, write_json
+from lonlib.storage.atomic import atomic_write, write_json
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
 

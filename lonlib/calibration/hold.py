@@ -53,10 +53,10 @@ import pandas as pd
 from lonlib.calibration.imitation import DEFAULT_TEACHER
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.calibration.study import JudgedLog
-from lonlib.ddpg.trainer import DDPGConfig, LocalSearchResult, SlotTrainer
+from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer
 from lonlib.search.algorithm import perturb_parameters
 from lonlib.storage.atomic import atomic_write, read_json, write_json
-from lonlib.storage.configs import named_config
+from lonlib.storage.configs import DDPGConfig, named_config
 from lonlib.task.behaviour import LABELS
 from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec

@@ -33,8 +33,8 @@ from typing import Any
 import torch
 
 from lonlib.ddpg.trainer import SlotTrainer
+from lonlib.storage.atomic import atomic_write
 from lonlib.storage.inflight import new_id, refusal_reason
-from lonlib.storage.store import atomic_write
 
 log = logging.getLogger(__name__)
 

@@ -30,7 +30,7 @@ from lonlib.calibration.study import (
     integrator_drift,
     read_cell,
 )
-from lonlib.storage.store import atomic_write
+from lonlib.storage.atomic import atomic_write
 from lonlib.task.behaviour import LABELS
 from lonlib.util.figures import png_bytes, themed
 

@@ -57,9 +57,9 @@ import numpy as np
 import pandas as pd
 
 from lonlib.calibration.inflight import CellCheckpoint
-from lonlib.ddpg.trainer import DDPGConfig, LocalSearchResult, SlotTrainer
-from lonlib.storage.configs import without_default_judging
-from lonlib.storage.store import atomic_write, read_json, write_json
+from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer
+from lonlib.storage.atomic import atomic_write, read_json, write_json
+from lonlib.storage.configs import DDPGConfig, without_default_judging
 from lonlib.task.behaviour import LABELS, describe_actors, describe_rollout, label
 from lonlib.task.pendulum import PendulumConfig, total_energy, wrap_angle
 from lonlib.task.policy import actor_spec, critic_spec

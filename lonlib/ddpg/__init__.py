@@ -1,142 +1,44 @@
 """DDPG as the local search F(theta, omega, e, h): networks, random streams, replay buffers,
 the reference and the lean learner, the slot trainer, their host-device copies (torch)."""
 
-from lonlib.ddpg.devices import (
-    Transfer,
-    TransferLog,
-    copy_to_device,
-    cpu_as_device,
-    host_tensor,
-    host_view,
-    is_host,
-    to_device,
-    to_host,
-)
-from lonlib.ddpg.lean import (
-    ADAM_TABLE_STEPS,
-    BETAS,
-    EPS,
-    LeanDDPG,
-    Learner,
-    learner_class,
-)
-from lonlib.ddpg.nets import (
-    HIDDEN,
-    BatchedMLP,
-    NetSpec,
-    actor_spec,
-    critic_spec,
-    forward_numpy,
-)
-from lonlib.ddpg.plain_state import (
-    TensorReader,
-)
-from lonlib.ddpg.reference import (
-    AutogradDDPG,
-    autograd_update,
-)
-from lonlib.ddpg.replay import (
-    ReplayBuffer,
-    row_width,
-)
-from lonlib.ddpg.search_interface import (
-    ddpg_local_search,
-    local_optimum,
-)
-from lonlib.ddpg.streams import (
-    EXPLORATION_NOISE,
-    GOLDEN,
-    MIX_1,
-    MIX_2,
-    PURPOSE_BITS,
-    REPLAY_SAMPLES,
-    SIMD_PAD,
-    START_NOISE,
-    WARMUP_ACTIONS,
-    CounterStreams,
-    check_seed,
-)
+from lonlib.ddpg.devices import TransferLog, cpu_as_device
+from lonlib.ddpg.lean import LeanDDPG, Learner, learner_class
+from lonlib.ddpg.reference import AutogradDDPG
+from lonlib.ddpg.replay import ReplayBuffer
+from lonlib.ddpg.search_interface import ddpg_local_search, local_optimum
+from lonlib.ddpg.streams import CounterStreams
 from lonlib.ddpg.trainer import (
-    BATCH_MULTIPLE,
-    CHECKPOINT_KEYS,
     HISTORY_COLUMNS,
-    JUDGE_BATCH,
-    LEARNER_STATE,
-    SEARCH_KEYS,
-    SLOT_ARRAYS,
     EpisodeRecord,
     LocalSearchResult,
     SlotTrainer,
-    check_batch_size,
     check_device,
-    check_parameters,
-    exploration_actions,
     greedy_scores,
-    is_improvement,
     local_search,
     local_search_batch,
     make_learner,
 )
-from lonlib.storage.configs import DDPGConfig  # DDPG's h, stored with every experiment (no torch)
+from lonlib.storage.configs import DDPGConfig
 
 __all__ = [
-    "ADAM_TABLE_STEPS",
     "AutogradDDPG",
-    "BATCH_MULTIPLE",
-    "BETAS",
-    "BatchedMLP",
-    "CHECKPOINT_KEYS",
     "CounterStreams",
     "DDPGConfig",
-    "EPS",
-    "EXPLORATION_NOISE",
     "EpisodeRecord",
-    "GOLDEN",
-    "HIDDEN",
     "HISTORY_COLUMNS",
-    "JUDGE_BATCH",
-    "LEARNER_STATE",
     "LeanDDPG",
     "Learner",
     "LocalSearchResult",
-    "MIX_1",
-    "MIX_2",
-    "NetSpec",
-    "PURPOSE_BITS",
-    "REPLAY_SAMPLES",
     "ReplayBuffer",
-    "SEARCH_KEYS",
-    "SIMD_PAD",
-    "SLOT_ARRAYS",
-    "START_NOISE",
     "SlotTrainer",
-    "TensorReader",
-    "Transfer",
     "TransferLog",
-    "WARMUP_ACTIONS",
-    "actor_spec",
-    "autograd_update",
-    "check_batch_size",
     "check_device",
-    "check_parameters",
-    "check_seed",
-    "copy_to_device",
     "cpu_as_device",
-    "critic_spec",
     "ddpg_local_search",
-    "exploration_actions",
-    "forward_numpy",
     "greedy_scores",
-    "host_tensor",
-    "host_view",
-    "is_host",
-    "is_improvement",
     "learner_class",
     "local_optimum",
     "local_search",
     "local_search_batch",
     "make_learner",
-    "row_width",
-    "to_device",
-    "to_host",
 ]

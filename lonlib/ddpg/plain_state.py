@@ -19,18 +19,8 @@ import numpy as np
 import torch
 
 from lonlib.ddpg.devices import to_device
-from lonlib.util.plain_data import (  # noqa: F401  (re-exported: the JSON checks lived here)
+from lonlib.util.plain_data import (
     StateLayoutError,
-    config_from_plain,
-    generator_from_state,
-    generator_state,
-    plain_bool,
-    plain_dict,
-    plain_float,
-    plain_int,
-    plain_list,
-    plain_str,
-    short_repr,
 )
 
 

@@ -15,7 +15,8 @@ import copy
 import numpy as np
 import torch
 
-from lonlib.ddpg.nets import BatchedMLP, NetSpec
+from lonlib.ddpg.nets import BatchedMLP
+from lonlib.task.policy import NetSpec
 
 
 def autograd_update(

@@ -14,8 +14,9 @@ import numpy as np
 import torch
 
 from lonlib.ddpg.devices import copy_to_device, host_tensor, to_device, to_host
-from lonlib.ddpg.plain_state import StateLayoutError, TensorReader
+from lonlib.ddpg.plain_state import TensorReader
 from lonlib.task.pendulum import StepResult
+from lonlib.util.plain_data import StateLayoutError
 
 
 def row_width(obs_size: int, act_size: int) -> int:

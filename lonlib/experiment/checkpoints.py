@@ -1,6 +1,6 @@
 """In-flight checkpoints of a lockstep batch: a killed lockstep experiment resumes mid-search.
 
-The stored trials are the experiment's results (:mod:`lonlib.storage.store`); a search still
+The stored trials are the experiment's results (:mod:`lonlib.storage.trials`); a search still
 training when the process dies would be lost with them alone. At the paper's batch a search
 runs for an hour or more on a laptop core, so the lockstep executor also writes its whole
 batch (a :class:`lonlib.ddpg.trainer.SlotTrainer`: networks, targets, Adam state, replay buffers,
@@ -54,30 +54,23 @@ from typing import Any
 
 import torch
 
-from lonlib.ddpg.plain_state import (
-    plain_dict,
-    plain_float,
-)
-from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer
-from lonlib.storage.inflight import (  # noqa: F401  (re-exported: the metadata lived here)
+from lonlib.ddpg.trainer import SlotTrainer
+from lonlib.storage.atomic import atomic_write
+from lonlib.storage.configs import DDPGConfig
+from lonlib.storage.inflight import (
     FORMAT,
     ID,
-    INFLIGHT_FOLDER,
     CheckpointUnreadable,
     InflightCheckpoint,
-    Job,
     OtherSettings,
-    Plan,
     checkpoint_lock_path,
-    inflight_checkpoints,
-    inflight_folder,
     new_checkpoint_path,
     new_id,
     refusal_reason,
-    scan_inflight,
 )
-from lonlib.storage.store import atomic_write
+from lonlib.storage.layout import Job
 from lonlib.task.pendulum import PendulumConfig
+from lonlib.util.plain_data import plain_dict, plain_float
 
 
 def save_inflight(metadata_path: Path, trainer: SlotTrainer, trials: dict[Job, int]) -> None:
@@ -288,7 +281,7 @@ def split_inflight(
     (for as many processes; each part continues its searches exactly as the whole would).
     With ``settings`` (this session's environment and DDPG settings), a batch trained with
     others is not read further (:class:`OtherSettings`, :func:`check_settings`). Raises as
-    :func:`load_inflight`, or :class:`lonlib.storage.store.DataWriteError` (then no part is
+    :func:`load_inflight`, or :class:`lonlib.storage.atomic.DataWriteError` (then no part is
     left)."""
     stored = read_inflight(checkpoint)
     if settings is not None:

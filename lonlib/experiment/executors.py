@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from lonlib.storage.configs import EXECUTORS
-from lonlib.storage.store import Job
+from lonlib.storage.layout import Job
 
 Task = Callable[[float, int], Any]
 OnDone = Callable[[Any], None]

@@ -11,7 +11,7 @@ batch sheds finished slots (:meth:`~lonlib.ddpg.trainer.SlotTrainer.shrink`).
 Every random number a search draws comes from its own ``(run seed, trial)`` streams and no
 reduction mixes slots, so a run's trials do not depend on ``K``, on its slot, or on the runs
 sharing the batch: on the CPU they are bit for bit the serial executor's (tested). Storage
-is the other executors' (:func:`lonlib.storage.store.save_step` after every search, each run's lock
+is the other executors' (:func:`lonlib.storage.trials.save_step` after every search, each run's lock
 held while it is in the batch), and every few minutes the whole batch is also written to an
 in-flight checkpoint (:mod:`lonlib.experiment.checkpoints`): a killed lockstep experiment resumes
 its searches in flight from there, losing at most the minutes since.
@@ -36,15 +36,9 @@ from typing import Any
 import numpy as np
 
 from lonlib.ddpg.search_interface import local_optimum
-from lonlib.ddpg.trainer import DDPGConfig, SlotTrainer, check_batch_size
+from lonlib.ddpg.trainer import SlotTrainer, check_batch_size
 from lonlib.experiment.checkpoints import (
-    CheckpointUnreadable,
-    InflightCheckpoint,
-    OtherSettings,
     check_settings,
-    checkpoint_lock_path,
-    inflight_checkpoints,
-    new_checkpoint_path,
     read_inflight,
     remove_inflight,
     remove_leftovers,
@@ -52,8 +46,19 @@ from lonlib.experiment.checkpoints import (
 )
 from lonlib.experiment.runs import experiment_plan, open_run, run_lock_path, run_summary
 from lonlib.search.algorithm import BasinHoppingRun, SearchRequest
+from lonlib.storage.atomic import DataWriteError
+from lonlib.storage.configs import DDPGConfig
+from lonlib.storage.inflight import (
+    CheckpointUnreadable,
+    InflightCheckpoint,
+    OtherSettings,
+    checkpoint_lock_path,
+    inflight_checkpoints,
+    new_checkpoint_path,
+)
+from lonlib.storage.layout import Job
 from lonlib.storage.lock import LockHeld, exclusive_lock
-from lonlib.storage.store import DataWriteError, Job, save_step
+from lonlib.storage.trials import save_step
 from lonlib.util.validation import check_range
 
 log = logging.getLogger(__name__)

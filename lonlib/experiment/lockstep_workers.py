@@ -26,17 +26,17 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from lonlib.experiment.checkpoints import (
+from lonlib.experiment.checkpoints import remove_inflight, split_inflight
+from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, draining, run_lockstep
+from lonlib.experiment.runs import experiment_plan, hold_runs
+from lonlib.storage.atomic import DataWriteError
+from lonlib.storage.inflight import (
     CheckpointUnreadable,
     OtherSettings,
     checkpoint_lock_path,
     inflight_checkpoints,
-    remove_inflight,
-    split_inflight,
 )
-from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, Job, draining, run_lockstep
-from lonlib.experiment.runs import experiment_plan, hold_runs
-from lonlib.storage.store import DataWriteError
+from lonlib.storage.layout import Job
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
 

@@ -5,7 +5,7 @@ An :class:`ExperimentConfig` expands to ``runs`` independent basin-hopping runs 
 perturbation strength ``p``. Run ``(p, run)`` draws everything from a seed derived from
 ``(experiment seed, p, run)``, so its result does not depend on where or in what order it
 runs. :func:`run_experiment` skips finished runs, continues interrupted ones after their
-last stored local search (see :mod:`lonlib.storage.store`) and executes the rest serially, in local
+last stored local search (see :mod:`lonlib.storage.trials`) and executes the rest serially, in local
 worker processes, on a Dask cluster (:mod:`lonlib.experiment.executors`) or as lockstep batches
 (:mod:`lonlib.experiment.lockstep`); :mod:`lonlib.storage.manifest`
 records the configuration and each session.
@@ -28,33 +28,22 @@ from tqdm import tqdm
 
 from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.ddpg.trainer import check_device
-from lonlib.experiment.checkpoints import (
-    checkpoint_lock_path,
-    remove_inflight,
-    scan_inflight,
-)
+from lonlib.experiment.checkpoints import remove_inflight
 from lonlib.experiment.executors import execute_runs, resolve_executor, session_executor
 from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_drain, check_lockstep, draining
 from lonlib.experiment.lockstep_workers import run_lockstep_processes
-from lonlib.experiment.runs import (  # noqa: F401  (re-exported: they lived here)
-    MANIFEST_LOCK,
-    RUN_LOCK,
-    experiment_plan,
-    hold_runs,
-    initial_parameters,
-    open_run,
-    run_lock_path,
-    run_summary,
+from lonlib.experiment.runs import experiment_plan, hold_runs, open_run, run_lock_path, run_summary
+from lonlib.storage.atomic import (
+    DataWriteError,
+    check_output_folder,
+    remove_temporary_files,
+    write_json,
 )
-from lonlib.storage.configs import (  # noqa: F401  (re-exported: configurations used to live here)
-    EXECUTION_ONLY_DDPG_FIELDS,
-    NAMED_CONFIGS,
-    QUICK_DDPG,
+from lonlib.storage.configs import (
     ExperimentConfig,
-    load_config,
-    named_config,
 )
-from lonlib.storage.layout import SAMPLING_LOCK, run_dir
+from lonlib.storage.inflight import checkpoint_lock_path, scan_inflight
+from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, run_dir
 from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.manifest import (
     capability_change,
@@ -65,17 +54,13 @@ from lonlib.storage.manifest import (
 )
 from lonlib.storage.provenance import session_provenance
 from lonlib.storage.result_path import RESULT_PATH_VERSION
-from lonlib.storage.status import experiment_status, run_status  # noqa: F401  (re-exported)
-from lonlib.storage.store import (
-    DataWriteError,
-    check_output_folder,
+from lonlib.storage.status import experiment_status
+from lonlib.storage.trials import (
     load_run_state,
     read_experiment_trials,
-    remove_temporary_files,
+    runs_ending_early,
     save_step,
-    write_json,
 )
-from lonlib.storage.trials import runs_ending_early
 from lonlib.util.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
@@ -249,7 +234,7 @@ def run_experiment(
     session (:func:`lonlib.storage.manifest.updated_manifest`).
 
     Before any compute: ``out`` must exist or be creatable in an existing folder and accept
-    files (:class:`lonlib.storage.store.DataWriteError` otherwise; on Dask, every worker checks it
+    files (:class:`lonlib.storage.atomic.DataWriteError` otherwise; on Dask, every worker checks it
     too), and its stored runs must be readable. A run that another process is writing is
     left to it and waited for once everything else is done; if its holder dies, this
     process continues the run from what the holder stored.
@@ -405,7 +390,7 @@ def warn_about_cpu_kernels(manifest: dict[str, Any], capability: str) -> None:
 def check_worker_sees_folder(out: str) -> None:
     """On an executor's worker, before any compute: the experiment folder the client set up
     is there (a worker without the shared file system would write elsewhere) and accepts
-    files. Raises :class:`lonlib.storage.store.DataWriteError` naming the folder."""
+    files. Raises :class:`lonlib.storage.atomic.DataWriteError` naming the folder."""
     if not manifest_path(Path(out)).exists():
         raise DataWriteError(
             errno.ENOENT,

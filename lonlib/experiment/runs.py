@@ -11,11 +11,12 @@ from typing import Any
 import numpy as np
 
 from lonlib.search.algorithm import BasinHoppingRun, RunState, random_parameters
+from lonlib.storage.atomic import remove_temporary_files
 from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.inflight import Plan
-from lonlib.storage.layout import MANIFEST_LOCK, RUN_LOCK  # noqa: F401  (MANIFEST_LOCK: re-exported)
+from lonlib.storage.layout import RUN_LOCK, read_manifest, run_dir
 from lonlib.storage.lock import LockHeld, exclusive_lock
-from lonlib.storage.store import load_run_state, read_manifest, remove_temporary_files, run_dir
+from lonlib.storage.trials import load_run_state
 
 
 def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np.ndarray, ...]:

@@ -18,7 +18,6 @@ import numpy as np
 import pandas as pd
 
 from lonlib.lon.graphs import Transitions, assemble_lon, build_lon, graph_arrays, node_id, sinks
-from lonlib.util.deprecation import renamed_keyword
 
 
 def behaviour_groups(graph: nx.DiGraph) -> pd.Series:
@@ -98,7 +97,6 @@ def behavioural_lon(graph: nx.DiGraph) -> nx.DiGraph:
     return out
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def behaviour_table(trials: pd.DataFrame, fitness_tolerance: float = 1e-9) -> pd.DataFrame:
     """The "typical behaviours" table: per p and label, the accepted optima, the sinks
     (ends of monotonic sequences, on the MLON), their fitness range and the label's share

@@ -36,8 +36,6 @@ import pandas as pd
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from lonlib.util.deprecation import renamed_keyword
-
 PREFIX = "b_"
 FITNESS_SLACK = 1e-9
 """Added to the fitness tolerance: fitness values are step counts over the nominal steps,
@@ -77,7 +75,6 @@ def standardise(features: pd.DataFrame) -> np.ndarray:
     return z
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def cluster(
     points: np.ndarray,
     fitness: np.ndarray,
@@ -146,7 +143,6 @@ def transitions(optima: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
     return source, child
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def behaviour_nodes(
     trials: pd.DataFrame, features: Sequence[str], epsilon: float, fitness_tolerance: float
 ) -> BehaviourNodes:
@@ -180,7 +176,6 @@ def behaviour_nodes(
     )
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def behaviour_node_curve(
     trials: pd.DataFrame,
     features: Sequence[str],

@@ -37,8 +37,7 @@ import pandas as pd
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from lonlib.storage.store import p_label
-from lonlib.util.deprecation import renamed_keyword
+from lonlib.storage.layout import p_label
 from lonlib.util.validation import check_choice, check_range
 
 EDGE_TYPES = ("improving", "equal", "worsening")
@@ -59,7 +58,6 @@ def _node_name(label: str, run: int, index: int) -> str:
     return f"p{label}_r{run}_t{index}"
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def edge_types(
     f_from: np.ndarray, f_to: np.ndarray, sense: str, fitness_tolerance: float
 ) -> np.ndarray:
@@ -70,7 +68,6 @@ def edge_types(
     )
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def edge_type(f_from: float, f_to: float, sense: str, fitness_tolerance: float) -> str:
     """``improving``, ``equal`` or ``worsening`` for a move from ``f_from`` to ``f_to``."""
     return EDGE_TYPES[int(edge_types(f_from, f_to, sense, fitness_tolerance))]
@@ -88,7 +85,6 @@ def _best(values: np.ndarray, sense: str) -> float | None:
 
 
 # ------------------------------------------------------------------------------ LON
-@renamed_keyword("tolerance", "fitness_tolerance")
 def build_lon(
     trials: pd.DataFrame, sense: str = "max", fitness_tolerance: float = 1e-9, full: bool = False
 ) -> nx.DiGraph:
@@ -139,7 +135,6 @@ def build_lon(
     )
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def lon_from_transitions(
     transitions: pd.DataFrame | Mapping[str, Sequence],
     sense: str = "min",
@@ -253,7 +248,6 @@ class Transitions:
     order: np.ndarray
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def assemble_lon(
     names: list[str],
     nodes: dict[str, np.ndarray],

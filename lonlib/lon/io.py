@@ -9,7 +9,6 @@ import numpy as np
 import pandas as pd
 
 from lonlib.lon.graphs import TRANSITION_COLUMNS, lon_from_transitions
-from lonlib.util.deprecation import renamed_keyword
 
 TRACE_HEADER = TRANSITION_COLUMNS
 
@@ -80,7 +79,6 @@ def _finite_numbers(*texts: str) -> bool:
         return False
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def from_trace(
     path: str | Path,
     sense: str = "min",

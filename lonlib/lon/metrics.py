@@ -26,7 +26,6 @@ from lonlib.lon.graphs import (
     compress,
     graph_arrays,
 )
-from lonlib.util.deprecation import renamed_keyword
 
 
 @dataclass(frozen=True)
@@ -192,7 +191,6 @@ def funnel_metrics(graph: nx.DiGraph) -> pd.DataFrame:
     )
 
 
-@renamed_keyword("tolerance", "fitness_tolerance")
 def metrics_table(
     trials: pd.DataFrame, sense: str = "max", fitness_tolerance: float = 1e-9
 ) -> pd.DataFrame:

@@ -8,17 +8,11 @@ from lonlib.search.algorithm import (
     LocalSearch,
     RunState,
     SearchRequest,
-    TakeStep,
     Trial,
-    TrialSeeds,
     basin_hopping,
     basin_hopping_steps,
-    non_deteriorating,
-    perturb,
     perturb_parameters,
     random_parameters,
-    search_start,
-    trial_seeds,
 )
 
 __all__ = [
@@ -29,15 +23,9 @@ __all__ = [
     "LocalSearch",
     "RunState",
     "SearchRequest",
-    "TakeStep",
     "Trial",
-    "TrialSeeds",
     "basin_hopping",
     "basin_hopping_steps",
-    "non_deteriorating",
-    "perturb",
     "perturb_parameters",
     "random_parameters",
-    "search_start",
-    "trial_seeds",
 ]

@@ -23,7 +23,7 @@ from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 
-from lonlib.storage.store import write_error
+from lonlib.storage.atomic import write_error
 
 
 class LockHeld(RuntimeError):
@@ -42,7 +42,7 @@ def exclusive_lock(path: Path, wait: bool = True, record_holder: bool = True) ->
     raise :class:`LockHeld` naming the holder. ``record_holder`` writes this process's pid,
     host and start time into the file while it holds the lock.
 
-    A lock file that cannot be created raises :class:`lonlib.storage.store.DataWriteError`.
+    A lock file that cannot be created raises :class:`lonlib.storage.atomic.DataWriteError`.
     """
     path = Path(path)
     try:

@@ -30,9 +30,9 @@ from importlib import metadata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from lonlib.storage.atomic import read_json, write_json
 from lonlib.storage.layout import checked_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
-from lonlib.storage.store import read_json, write_json
 from lonlib.storage.trials import runs_ending_early
 
 if TYPE_CHECKING:

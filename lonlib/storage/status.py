@@ -9,7 +9,8 @@ import pandas as pd
 
 from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.inflight import inflight_checkpoints
-from lonlib.storage.store import read_manifest, read_trials, replay_trials, trials_path
+from lonlib.storage.layout import read_manifest, trials_path
+from lonlib.storage.trials import read_trials, replay_trials
 
 
 def run_status(out: str | Path) -> pd.DataFrame:
