@@ -40,9 +40,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lonlib.config import DDPGConfig, PendulumConfig
 from lonlib.ddpg.trainer import SlotTrainer, make_learner
-from lonlib.storage.configs import DDPGConfig
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 
 ENV = PendulumConfig(n_carts=2)
@@ -169,8 +168,8 @@ def trial_rows(device: str, steps: int) -> list[dict]:
     slot and with two: are the stored trials the same?"""
     import tempfile
 
+    from lonlib.config import named_config
     from lonlib.experiment.running import run_experiment
-    from lonlib.storage.configs import named_config
     from lonlib.storage.trials import read_experiment_trials
 
     base = named_config("reference")
@@ -241,8 +240,8 @@ def k_growth_rows(device: str, marks: tuple[int, ...], batch: int = 256) -> list
 def greedy_rows(count: int = 256) -> list[dict]:
     """Host-side greedy rollouts of stored optima (data/reference, a mix of behaviours):
     seconds per policy in one batched rollout of ``count``, and alone."""
+    from lonlib.config import DDPGConfig as Config
     from lonlib.ddpg.trainer import greedy_scores
-    from lonlib.storage.configs import DDPGConfig as Config
 
     files = sorted(Path("data/reference").glob("p=*/run_*/optimum_*.npz"))
     if not files:

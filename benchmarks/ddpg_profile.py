@@ -21,8 +21,8 @@ import torch
 from torch.profiler import ProfilerActivity, profile
 
 from benchmarks.ddpg import ENV, make_update
+from lonlib.config import DDPGConfig
 from lonlib.ddpg.trainer import local_search_batch
-from lonlib.storage.configs import DDPGConfig
 from lonlib.task.policy import actor_spec, critic_spec
 
 

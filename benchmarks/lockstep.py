@@ -20,11 +20,10 @@ import numpy as np
 import torch
 
 from benchmarks.common import RESULTS, report
+from lonlib.config import DDPGConfig, PendulumConfig, named_config
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.experiment.running import run_experiment
-from lonlib.storage.configs import DDPGConfig, named_config
 from lonlib.storage.trials import read_experiment_trials
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 
 ENV = PendulumConfig(n_carts=2)

@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import best_of, report
+from lonlib.config import PendulumConfig
 from lonlib.storage import optimum_path, read_experiment_trials, read_optimum
 from lonlib.task import compiled
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.rollout import run_actors
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,8 +64,9 @@ def search_ms_per_step(backend: str, steps: int = 6000) -> float:
     judging every episode), in a process of its own."""
     code = (
         "import time, numpy as np\n"
-        "from lonlib.ddpg import DDPGConfig, local_search\n"
-        "from lonlib.task.pendulum import PendulumConfig\n"
+        "from lonlib.config import DDPGConfig\n"
+        "from lonlib.ddpg import local_search\n"
+        "from lonlib.config import PendulumConfig\n"
         "from lonlib.task.policy import actor_spec, critic_spec\n"
         "rng = np.random.default_rng(0)\n"
         f"hp = DDPGConfig(batch_size=256, max_steps={steps}, min_steps={steps}, "

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.common import best_of, report
-from lonlib.task.pendulum import CoupledPendulums, PendulumConfig, evaluate
+from lonlib.config import PendulumConfig
+from lonlib.task.pendulum import CoupledPendulums
 from lonlib.task.policy import actor_spec, forward_numpy
+from lonlib.task.rollout import evaluate
 
 PROTOTYPE_STEPS_PER_SECOND = 1.5e6  # plain numpy prototype, two carts, B = 2000, one core
 

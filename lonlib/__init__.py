@@ -11,8 +11,9 @@ from lonlib.util.cpu_kernels import pin_torch_cpu_kernels as _pin
 
 _pin()
 
+from lonlib.config import PendulumConfig  # noqa: E402
 from lonlib.task.env import ENV_ID, register_envs  # noqa: E402
-from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig  # noqa: E402
+from lonlib.task.pendulum import CoupledPendulums, EndReason  # noqa: E402
 from lonlib.task.rollout import evaluate  # noqa: E402
 
 __version__ = "0.1.0"

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from lonlib.config import EXECUTORS, NAMED_CONFIGS
 from lonlib.storage.atomic import CorruptDataError, DataWriteError, check_output_place
-from lonlib.storage.configs import EXECUTORS, NAMED_CONFIGS
-from lonlib.storage.layout import p_label
 from lonlib.storage.manifest import CHANGEABLE_FIELDS
+from lonlib.util.labels import p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.validation import check_range
 
@@ -81,8 +81,8 @@ def _check_output_folder(out: Path) -> str:
 
 
 def _run(args: argparse.Namespace) -> None:
+    from lonlib.config import load_config
     from lonlib.experiment.running import pending_runs, run_experiment
-    from lonlib.storage.configs import load_config
 
     config = load_config(args.config)
     changes: dict = {}
@@ -316,8 +316,9 @@ def _thin(args: argparse.Namespace) -> None:
 
 
 def _calibrate(args: argparse.Namespace) -> None:
-    from lonlib.calibration import load_calibration, run_calibration, with_overrides
+    from lonlib.calibration import run_calibration
     from lonlib.calibration.report import calibration_block, readme_markers, write_outputs
+    from lonlib.config import load_calibration, with_overrides
     from lonlib.util.readme_tables import splice
 
     config = with_overrides(load_calibration(args.grid), args.seeds, args.max_steps, args.batch)

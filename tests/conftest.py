@@ -51,8 +51,8 @@ def built_once(tmp_path_factory, name: str, build: Callable[[Path], None]) -> Pa
 
 
 def _run_tiny(folder: Path) -> None:
+    from lonlib.config import load_config
     from lonlib.experiment.running import run_experiment
-    from lonlib.storage.configs import load_config
 
     config = load_config(write_tiny_yaml(folder))
     trials = run_experiment(config, folder / "out", progress=False)
@@ -64,7 +64,7 @@ def tiny_experiment(tmp_path_factory):
     """A finished tiny experiment: (config, folder, trials). Run once per session (see
     :func:`built_once`); each worker gets its own copy of the folder, and the trials that
     run returned."""
-    from lonlib.storage.configs import load_config
+    from lonlib.config import load_config
 
     shared = built_once(tmp_path_factory, "tiny", _run_tiny)
     folder = tmp_path_factory.mktemp("tiny")

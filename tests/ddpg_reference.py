@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from lonlib.config import DDPGConfig
 from lonlib.ddpg.trainer import make_learner
-from lonlib.storage.configs import DDPGConfig
 from lonlib.task.policy import NetSpec
 
 

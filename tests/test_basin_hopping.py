@@ -3,17 +3,15 @@
 import numpy as np
 import pytest
 
+from lonlib.config import BasinHoppingConfig, DDPGConfig, PendulumConfig
 from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.search.algorithm import (
-    BasinHoppingConfig,
     LocalOptimum,
     RunState,
     basin_hopping,
     basin_hopping_steps,
     trial_seeds,
 )
-from lonlib.storage.configs import DDPGConfig
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 
 START = (np.zeros(6, dtype=np.float32), np.zeros(4, dtype=np.float32))

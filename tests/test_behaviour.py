@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from lonlib.config import PendulumConfig, Scoring
 from lonlib.task.behaviour import (
     LABELS,
     BehaviourDescriptor,
@@ -16,9 +17,8 @@ from lonlib.task.behaviour import (
     relabel,
 )
 from lonlib.task.controllers import SwingUpBalanceController, zero_controller
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, forward_numpy
-from lonlib.task.rollout import Scoring, evaluate
+from lonlib.task.rollout import evaluate
 
 
 def test_the_swing_up_and_balance_controller_is_labelled_balancing():

@@ -10,21 +10,20 @@ import pytest
 import lonlib.calibration.study as calibration
 from lonlib.calibration.campaign import run_calibration
 from lonlib.calibration.report import search_table
-from lonlib.calibration.study import (
-    CELL_COLUMNS,
+from lonlib.calibration.study import CELL_COLUMNS, greedy_rollout, integrator_drift
+from lonlib.cli import main as cli_main
+from lonlib.config import (
     CalibrationConfig,
     Cell,
-    greedy_rollout,
+    PendulumConfig,
+    Scoring,
     grid,
-    integrator_drift,
     load_calibration,
     named_calibration,
 )
-from lonlib.cli import main as cli_main
+from lonlib.config.calibration import RECORD_FORMAT
 from lonlib.task.behaviour import LABELS, describe, label
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec
-from lonlib.task.rollout import Scoring
 
 
 @pytest.fixture(scope="module")
@@ -174,7 +173,7 @@ def test_cells_stored_in_the_former_record_format_are_refused(tiny_study, tmp_pa
     config, out = tiny_study
     cell = config.cells[0]
     record = json.loads((out / "cells" / f"{cell.name}.json").read_text())
-    assert record["settings"]["record_format"] == calibration.RECORD_FORMAT
+    assert record["settings"]["record_format"] == RECORD_FORMAT
     del record["settings"]["record_format"]
     (tmp_path / "cells").mkdir()
     (tmp_path / "cells" / f"{cell.name}.json").write_text(json.dumps(record))
@@ -366,7 +365,7 @@ def test_episodes_before_the_first_update_do_not_hide_the_best_fitness():
 
 
 def test_a_warm_up_longer_than_an_episode_still_gives_a_best_fitness(tmp_path):
-    tiny = calibration.named_calibration("tiny")
+    tiny = named_calibration("tiny")
     config = dataclasses.replace(
         tiny, cells=tiny.cells[:1], ddpg=dataclasses.replace(tiny.ddpg, warmup_steps=120)
     )

@@ -38,9 +38,9 @@ from lonlib.analysis.effect_size import bootstrap_delta_ci, cliffs_delta, compar
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import README_END as SUMMARY_END
 from lonlib.analysis.summary import experiment_summary, summary_markdown
+from lonlib.config import ExperimentConfig
 from lonlib.search.algorithm import Trial
 from lonlib.storage.atomic import write_json
-from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.trials import read_experiment_trials, save_step
 
 REPO = Path(__file__).resolve().parent.parent

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 from lonlib.cli import build_parser, main
+from lonlib.config import load_config
 from lonlib.experiment.running import run_experiment
 from lonlib.storage.atomic import DataWriteError
-from lonlib.storage.configs import load_config
 
 READERS = ["status", "lon", "analyse", "record", "verify", "thin"]
 # What reStructuredText or Sphinx markup looks like in a help text.

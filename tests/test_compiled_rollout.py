@@ -18,8 +18,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lonlib.config import PendulumConfig
 from lonlib.task import compiled
-from lonlib.task.pendulum import CoupledPendulums, PendulumConfig
+from lonlib.task.pendulum import CoupledPendulums
 from lonlib.task.policy import actor_spec
 from lonlib.task.rollout import perturbed_offsets, run_actors
 from lonlib.util import portable_math
@@ -206,7 +207,7 @@ SCRIPT = """
 import json, numpy as np
 from lonlib.task import compiled
 from lonlib.task.rollout import run_actors, perturbed_offsets
-from lonlib.task.pendulum import PendulumConfig
+from lonlib.config import PendulumConfig
 from tests.test_rollout import actors, fingerprint
 config = PendulumConfig(steps=300, motor="force", integrator="euler")
 result = run_actors(actors(11, 6), config, perturbed_offsets(config, 6, 0.05), trace=True)

@@ -17,8 +17,7 @@ import yaml
 from hypothesis import HealthCheck, example, given, reject, settings
 from hypothesis import strategies as st
 
-from lonlib.storage.configs import DDPGConfig, ExperimentConfig, load_config
-from lonlib.task.pendulum import PendulumConfig
+from lonlib.config import DDPGConfig, ExperimentConfig, PendulumConfig, load_config
 
 SECTIONS = {None: ExperimentConfig, "env": PendulumConfig, "ddpg": DDPGConfig}
 FIELDS = {

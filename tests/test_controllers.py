@@ -5,14 +5,9 @@ import math
 import numpy as np
 import pytest
 
+from lonlib.config import PendulumConfig
 from lonlib.task.controllers import SwingUpBalanceController, decode_sensors, zero_controller
-from lonlib.task.pendulum import (
-    CoupledPendulums,
-    EndReason,
-    PendulumConfig,
-    sensors,
-    wrap_angle,
-)
+from lonlib.task.pendulum import CoupledPendulums, EndReason, sensors, wrap_angle
 from lonlib.task.rollout import evaluate
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from lonlib.config import DDPGConfig, PendulumConfig
 from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import EXPLORATION_NOISE, CounterStreams
 from lonlib.ddpg.trainer import (
@@ -16,8 +17,7 @@ from lonlib.ddpg.trainer import (
     local_search,
     local_search_batch,
 )
-from lonlib.storage.configs import DDPGConfig
-from lonlib.task.pendulum import PendulumConfig, StepResult
+from lonlib.task.pendulum import StepResult
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 from lonlib.task.rollout import evaluate, score_actors
 from tests.ddpg_reference import lonlib_updates, reference_updates

@@ -4,11 +4,10 @@ import numpy as np
 import pytest
 import torch
 
+from lonlib.config import DDPGConfig, PendulumConfig
 from lonlib.ddpg.lean import LeanDDPG, learner_class
 from lonlib.ddpg.reference import AutogradDDPG
 from lonlib.ddpg.trainer import local_search_batch
-from lonlib.storage.configs import DDPGConfig
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 
 HP = {"learning_rate": 1e-3, "gamma": 0.99, "tau": 0.005}

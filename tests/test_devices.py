@@ -19,6 +19,7 @@ from torch.overrides import TorchFunctionMode
 import lonlib
 import lonlib.ddpg.devices as devices
 import lonlib.ddpg.trainer as trainer_module
+from lonlib.config import DDPGConfig, PendulumConfig
 from lonlib.ddpg.devices import (
     Transfer,
     TransferLog,
@@ -34,8 +35,6 @@ from lonlib.ddpg.plain_state import TensorReader
 from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import EXPLORATION_NOISE, REPLAY_SAMPLES, WARMUP_ACTIONS, CounterStreams
 from lonlib.ddpg.trainer import SlotTrainer, check_device, exploration_actions
-from lonlib.storage.configs import DDPGConfig
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 
 ENV = PendulumConfig(n_carts=1, steps=400)

@@ -16,10 +16,10 @@ from tqdm import tqdm
 
 import lonlib.experiment.lockstep
 from lonlib.cli import main
+from lonlib.config import load_config
 from lonlib.experiment.lockstep import run_lockstep
 from lonlib.experiment.running import _refresh, pending_runs, run_experiment
 from lonlib.experiment.runs import hold_runs
-from lonlib.storage.configs import load_config
 from lonlib.storage.inflight import inflight_checkpoints
 from lonlib.storage.status import run_status
 from lonlib.storage.trials import read_experiment_trials

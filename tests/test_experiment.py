@@ -12,9 +12,9 @@ import pandas as pd
 import pytest
 
 from lonlib.cli import main as cli_main
+from lonlib.config import ExperimentConfig, load_config, named_config
 from lonlib.experiment.running import run_experiment, status
 from lonlib.storage.atomic import CorruptDataError
-from lonlib.storage.configs import ExperimentConfig, load_config, named_config
 from lonlib.storage.layout import history_path, optimum_path, trials_path
 from lonlib.storage.trials import read_optimum, read_trials
 from lonlib.task.behaviour import LABELS, describe, descriptors_of

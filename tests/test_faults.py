@@ -23,9 +23,9 @@ import pytest
 import yaml
 
 import lonlib
+from lonlib.config import load_config
 from lonlib.experiment.running import check_worker_sees_folder, run_experiment, status
 from lonlib.storage.atomic import CorruptDataError, DataWriteError, read_json
-from lonlib.storage.configs import load_config
 from lonlib.storage.layout import optimum_path, run_dir, trials_path
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import load_run_state, read_experiment_trials, read_optimum

@@ -15,7 +15,8 @@ import lonlib.calibration.hold as hold
 from lonlib.calibration.hold import HoldTest, HoldTestConfig, held, judged_measures, summarise
 from lonlib.calibration.imitation import DEFAULT_TEACHER, load_teacher, pair_teacher
 from lonlib.cli import main
-from lonlib.task import PendulumConfig, nominal_offsets, run_actors, run_policy
+from lonlib.config import PendulumConfig
+from lonlib.task import nominal_offsets, run_actors, run_policy
 
 ROOT = Path(__file__).resolve().parents[1]
 ACTOR_FOLDER = ROOT / "data" / "studies" / "hold-test"

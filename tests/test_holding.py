@@ -16,9 +16,9 @@ from lonlib.analysis.holding import (
     holding_table,
     splice_holding,
 )
-from lonlib.storage import named_config, read_experiment_trials
+from lonlib.config import PendulumConfig, named_config
+from lonlib.storage import read_experiment_trials
 from lonlib.task.behaviour import relabel
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.rollout import Rollout, Trace
 
 ROOT = Path(__file__).resolve().parents[1]

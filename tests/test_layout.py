@@ -81,11 +81,11 @@ def test_every_subpackage_re_exports_its_public_names(name):
 
 
 CONFIGURATIONS = {
-    "lonlib/task/pendulum.py": "PendulumConfig",
-    "lonlib/task/rollout.py": "Scoring",
-    "lonlib/search/algorithm.py": "BasinHoppingConfig",
-    "lonlib/storage/configs.py": "ExperimentConfig",
-    "lonlib/calibration/study.py": "CalibrationConfig",
+    "lonlib/config/pendulum.py": "PendulumConfig",
+    "lonlib/config/scoring.py": "Scoring",
+    "lonlib/config/search.py": "BasinHoppingConfig",
+    "lonlib/config/experiment.py": "ExperimentConfig",
+    "lonlib/config/calibration.py": "CalibrationConfig",
 }
 
 
@@ -93,8 +93,9 @@ CONFIGURATIONS = {
     "path, name",
     [
         *CONFIGURATIONS.items(),
-        ("lonlib/storage/configs.py", "DDPGConfig"),
-        ("lonlib/calibration/study.py", "Cell"),
+        ("lonlib/config/ddpg.py", "DDPGConfig"),
+        ("lonlib/config/calibration.py", "Cell"),
+        ("lonlib/config/calibration.py", "StartSpread"),
     ],
 )
 def test_every_field_of_a_public_configuration_has_a_docstring(path, name):

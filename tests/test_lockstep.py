@@ -9,11 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from lonlib.config import DDPGConfig, ExperimentConfig, PendulumConfig
 from lonlib.experiment.running import run_experiment, run_one, status
-from lonlib.storage.configs import DDPGConfig, ExperimentConfig
 from lonlib.storage.status import run_status
 from lonlib.storage.trials import read_experiment_trials
-from lonlib.task.pendulum import PendulumConfig
 from tests.conftest import built_once
 
 # Searches stop by patience at different times, so slots are refilled while others are in

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
+from lonlib.config import PendulumConfig
+from lonlib.config.pendulum import STEP_CAP
 from lonlib.task.pendulum import (
-    STEP_CAP,
     CoupledPendulums,
     EndReason,
-    PendulumConfig,
     motor_command,
     sensors,
     total_energy,

@@ -16,7 +16,7 @@ from lonlib.analysis.recordings import (
     scene,
     scene_bounds,
 )
-from lonlib.task.pendulum import PendulumConfig
+from lonlib.config import PendulumConfig
 from lonlib.task.policy import actor_spec
 from lonlib.task.rollout import run_actors
 

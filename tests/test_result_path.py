@@ -13,10 +13,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.ddpg import DDPGConfig
+from lonlib.config import DDPGConfig, ExperimentConfig, named_config
 from lonlib.experiment import run_experiment
 from lonlib.storage.atomic import read_json
-from lonlib.storage.configs import ExperimentConfig, named_config
 from lonlib.storage.manifest import (
     capability_change,
     manifest_path,

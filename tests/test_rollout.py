@@ -15,16 +15,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lonlib.config import PendulumConfig, Scoring
 from lonlib.task.behaviour import describe, describe_actors
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec
-from lonlib.task.rollout import (
-    Scoring,
-    nominal_offsets,
-    perturbed_offsets,
-    run_actors,
-    score_actors,
-)
+from lonlib.task.rollout import nominal_offsets, perturbed_offsets, run_actors, score_actors
 from lonlib.util import portable_math
 
 SHORT = PendulumConfig(steps=300)
@@ -78,8 +72,8 @@ def test_one_shared_actor_and_one_actor_per_row_are_the_same_arithmetic():
 
 DISPATCH_SCRIPT = """
 import hashlib, json, numpy as np
-from lonlib.task.rollout import run_actors, Scoring, score_actors
-from lonlib.task.pendulum import PendulumConfig
+from lonlib.config import Scoring
+from lonlib.task.rollout import run_actors, score_actors
 from tests.test_rollout import actors, fingerprint, SHORT
 result = run_actors(actors(11, 6), SHORT, trace=True)
 scores = score_actors(actors(12, 3), SHORT, Scoring(estimate="robust", starts=4))
@@ -245,7 +239,7 @@ def test_every_entry_point_scores_from_the_same_noisy_start():
     import tempfile
 
     from lonlib.analysis.recordings import record, recording_properties
-    from lonlib.storage.configs import DDPGConfig
+    from lonlib.config import DDPGConfig
     from lonlib.task.rollout import actor_policy, evaluate
 
     config = PendulumConfig(steps=300, initial_angle=0.3, initial_noise=0.2)
@@ -266,7 +260,7 @@ def test_every_entry_point_scores_from_the_same_noisy_start():
 
 @pytest.mark.parametrize("field", ["seed", "eval_seed"])
 def test_negative_seeds_are_refused_by_name(field):
-    from lonlib.storage.configs import DDPGConfig
+    from lonlib.config import DDPGConfig
 
     with pytest.raises(ValueError, match="seed"):
         Scoring(**{field: -1})

@@ -12,10 +12,10 @@ import warnings
 import pytest
 
 from lonlib.cli import main as cli_main
+from lonlib.config import load_config
 from lonlib.experiment.running import run_experiment
 from lonlib.storage import manifest_path, session_seconds
 from lonlib.storage.atomic import DataWriteError
-from lonlib.storage.configs import load_config
 from lonlib.storage.layout import MANIFEST_LOCK
 from lonlib.storage.lock import exclusive_lock
 from lonlib.storage.manifest import mark_session_ended

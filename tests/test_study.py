@@ -13,27 +13,27 @@ import yaml
 
 import lonlib.calibration.inflight as inflight
 import lonlib.calibration.study as study
-from lonlib.calibration import (
-    load_calibration,
-    named_calibration,
-    run_calibration,
-    with_overrides,
-)
+from lonlib.calibration import run_calibration
 from lonlib.calibration.report import readme_markers, write_outputs
-from lonlib.calibration.study import (
+from lonlib.calibration.study import json_roundtrip, judged_summary
+from lonlib.cli import main
+from lonlib.config import (
     CalibrationConfig,
     Cell,
+    ExperimentConfig,
+    PendulumConfig,
+    Scoring,
     StartSpread,
-    json_roundtrip,
-    judged_summary,
+    load_calibration,
+    named_calibration,
+    named_config,
+    with_overrides,
 )
-from lonlib.cli import main
 from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer, greedy_scores
-from lonlib.storage.configs import ExperimentConfig, named_config
 from lonlib.task.behaviour import describe_actors, describe_rollout, label
-from lonlib.task.pendulum import CoupledPendulums, PendulumConfig
+from lonlib.task.pendulum import CoupledPendulums
 from lonlib.task.policy import actor_spec, critic_spec
-from lonlib.task.rollout import Scoring, nominal_offsets, run_actors
+from lonlib.task.rollout import nominal_offsets, run_actors
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = named_calibration("tiny")

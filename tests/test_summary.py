@@ -18,10 +18,10 @@ from lonlib.analysis.summary import (
     splice_summary,
     summary_markdown,
 )
+from lonlib.config import ExperimentConfig
 from lonlib.experiment.running import status
 from lonlib.search.algorithm import Trial
 from lonlib.storage.atomic import write_json
-from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.inflight import FORMAT
 from lonlib.storage.status import run_status
 from lonlib.storage.trials import read_experiment_trials, save_step

@@ -115,7 +115,7 @@ def test_an_experiment_of_another_result_path_is_not_extended(damaged):
     data = json.loads(manifest.read_text())
     data["sessions"][0]["result_path_version"] = None
     manifest.write_text(json.dumps(data))
-    from lonlib.storage.configs import ExperimentConfig
+    from lonlib.config import ExperimentConfig
 
     config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
     run_experiment(config, folder, progress=False)  # finished: nothing to sample, no refusal
@@ -159,8 +159,8 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
 @pytest.fixture(scope="module")
 def robust_experiment(tmp_path_factory):
     """The tiny experiment under fitness_estimate robust, with start noise and other seeds."""
+    from lonlib.config import load_config
     from lonlib.experiment.running import run_experiment
-    from lonlib.storage.configs import load_config
     from tests.conftest import write_tiny_yaml
 
     folder = tmp_path_factory.mktemp("robust")
@@ -222,7 +222,7 @@ def test_a_recording_of_another_episode_is_an_error(damaged):
     from lonlib.storage.trials import read_optimum
 
     folder, trials = damaged
-    from lonlib.storage.configs import ExperimentConfig
+    from lonlib.config import ExperimentConfig
 
     config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
     rows = trials[(trials.p == trials.p.iloc[0]) & (trials.run == trials.run.iloc[0])]

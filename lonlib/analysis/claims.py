@@ -74,8 +74,8 @@ from lonlib.lon.behaviour import behavioural_lon
 from lonlib.lon.behaviour_space import behaviour_node_curve, behaviour_nodes
 from lonlib.lon.graphs import build_lon, mlon, sinks
 from lonlib.lon.metrics import node_metrics
-from lonlib.storage.layout import p_label
 from lonlib.storage.trials import read_finished_trials
+from lonlib.util.labels import p_label
 
 REPRODUCED = "reproduced"
 CONTRADICTED = "contradicted"

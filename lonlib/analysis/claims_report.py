@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lonlib.storage.layout import p_label
+from lonlib.util.labels import p_label
 from lonlib.util.readme_tables import splice_generated
 
 CLAIM_COLUMNS = {"claim": "claim", "paper": "the paper says", "evidence": "evidence"}

@@ -29,11 +29,11 @@ import numpy as np
 import pandas as pd
 
 from lonlib.analysis.peaks import compare_with_paper, detect_peaks
+from lonlib.config import PendulumConfig, Scoring
 from lonlib.storage.layout import optimum_path
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import describe_actors, label
-from lonlib.task.pendulum import PendulumConfig
-from lonlib.task.rollout import Scoring, score_actors
+from lonlib.task.rollout import score_actors
 
 __all__ = [
     "NOISE_LEVELS",

@@ -23,10 +23,10 @@ import pandas as pd
 from lonlib.analysis.claims_report import markdown_table
 from lonlib.analysis.conditioning import stored_actors
 from lonlib.analysis.summary import behaviour_counts
-from lonlib.storage.layout import p_label
+from lonlib.config import PendulumConfig, Scoring
 from lonlib.task.behaviour import PREFIX, BehaviourThresholds, descriptors_of, label
-from lonlib.task.pendulum import PendulumConfig
-from lonlib.task.rollout import Rollout, Scoring, run_actors
+from lonlib.task.rollout import Rollout, run_actors
+from lonlib.util.labels import p_label
 from lonlib.util.readme_tables import has_markers, splice_generated
 
 README_BEGIN = "<!-- holding:begin (lonlib analyse data/one-cart --docs docs/one-cart.md) -->"

@@ -50,14 +50,15 @@ from lonlib.analysis.plots import (
 )
 from lonlib.analysis.recordings import record, recording_name
 from lonlib.analysis.summary import experiment_summary
+from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
 from lonlib.lon.metrics import lon_metrics
-from lonlib.storage.configs import ExperimentConfig
-from lonlib.storage.layout import optimum_path, p_label, read_manifest
+from lonlib.storage.layout import optimum_path, read_manifest
 from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
 from lonlib.util.figures import save_png
+from lonlib.util.labels import p_label
 from lonlib.util.validation import check_range
 
 

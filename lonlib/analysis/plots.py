@@ -31,9 +31,9 @@ from matplotlib.ticker import MaxNLocator
 
 from lonlib.analysis.peaks import PAPER_PEAKS, detect_peaks
 from lonlib.lon.io import to_igraph
-from lonlib.storage.layout import p_label
 from lonlib.task.behaviour import LABELS
 from lonlib.util.figures import themed
+from lonlib.util.labels import p_label
 
 GREY, RED = "#8a8a8a", "#d62728"
 # Marks that are not behaviours (the paper's peaks, detected peaks, a run's best): no label's.

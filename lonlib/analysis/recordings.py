@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lonlib.storage.layout import p_label
-from lonlib.task.pendulum import PendulumConfig
-from lonlib.task.rollout import Rollout, Scoring, run_actors
+from lonlib.config import PendulumConfig, Scoring
+from lonlib.task.rollout import Rollout, run_actors
+from lonlib.util.labels import p_label
 
 
 def recording_name(

@@ -9,9 +9,9 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.analysis.claims_report import markdown_table
-from lonlib.storage.layout import p_label
 from lonlib.storage.status import run_status
 from lonlib.storage.trials import read_finished_trials
+from lonlib.util.labels import p_label
 from lonlib.util.readme_tables import splice_generated
 
 README_BEGIN = "<!-- summary:begin (lonlib analyse data/reference --docs docs/results.md) -->"

@@ -7,31 +7,13 @@ from lonlib.calibration.report import (
     calibration_markdown,
     write_outputs,
 )
-from lonlib.calibration.study import (
-    DEFAULT_CELLS,
-    CalibrationConfig,
-    Cell,
-    StartSpread,
-    grid,
-    load_calibration,
-    named_calibration,
-    run_cell,
-    with_overrides,
-)
+from lonlib.calibration.study import run_cell
 
 __all__ = [
-    "CalibrationConfig",
     "CalibrationResult",
-    "Cell",
-    "DEFAULT_CELLS",
-    "StartSpread",
     "calibration_figure",
     "calibration_markdown",
-    "grid",
-    "load_calibration",
-    "named_calibration",
     "run_calibration",
     "run_cell",
-    "with_overrides",
     "write_outputs",
 ]

@@ -9,12 +9,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lonlib.calibration.report import CalibrationResult, write_outputs
-from lonlib.calibration.study import (
-    CalibrationConfig,
-    cell_starts,
-    read_cell,
-    run_and_store_cell,
-)
+from lonlib.calibration.study import cell_starts, read_cell, run_and_store_cell
+from lonlib.config import CalibrationConfig
 from lonlib.storage.atomic import atomic_write, write_json
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range

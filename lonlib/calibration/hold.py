@@ -3,7 +3,7 @@
 From a start at the top, perturbed as basin hopping perturbs (U[-p, p] on every parameter of
 Actor and Critic, :func:`lonlib.search.perturb_parameters`), the reference experiment's DDPG
 local search (:class:`lonlib.ddpg.trainer.SlotTrainer`, the reference's
-:class:`lonlib.storage.configs.DDPGConfig`: batch 2000, at most 150k env steps) runs with
+:class:`lonlib.config.ddpg.DDPGConfig`: batch 2000, at most 150k env steps) runs with
 ``seeds`` seeds per p in three **arms**:
 
 * ``fresh``: the two-cart imitation Actor (:mod:`lonlib.calibration.imitation`) with a fresh
@@ -53,12 +53,11 @@ import pandas as pd
 from lonlib.calibration.imitation import DEFAULT_TEACHER
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.calibration.study import JudgedLog
+from lonlib.config import DDPGConfig, PendulumConfig, named_config
 from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer
 from lonlib.search.algorithm import perturb_parameters
 from lonlib.storage.atomic import atomic_write, read_json, write_json
-from lonlib.storage.configs import DDPGConfig, named_config
 from lonlib.task.behaviour import LABELS
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.util.validation import check_choice, check_field_types, check_keys, check_range
 

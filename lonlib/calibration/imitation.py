@@ -41,12 +41,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from lonlib.config import PendulumConfig, Scoring
+from lonlib.config.pendulum import SENSORS_PER_CART
 from lonlib.storage.atomic import atomic_write, write_json
-from lonlib.task.pendulum import SENSORS_PER_CART, PendulumConfig
 from lonlib.task.policy import actor_spec, forward_numpy
 from lonlib.task.rollout import (
     Policy,
-    Scoring,
     nominal_offsets,
     perturbed_offsets,
     run_actors,

@@ -25,11 +25,11 @@ from lonlib.calibration.study import (
     AGGREGATIONS,
     BALANCING_FITNESS,
     CELL_COLUMNS,
-    CalibrationConfig,
     history_summary,
     integrator_drift,
     read_cell,
 )
+from lonlib.config import CalibrationConfig
 from lonlib.storage.atomic import atomic_write
 from lonlib.task.behaviour import LABELS
 from lonlib.util.figures import png_bytes, themed

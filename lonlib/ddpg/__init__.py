@@ -18,12 +18,10 @@ from lonlib.ddpg.trainer import (
     local_search_batch,
     make_learner,
 )
-from lonlib.storage.configs import DDPGConfig
 
 __all__ = [
     "AutogradDDPG",
     "CounterStreams",
-    "DDPGConfig",
     "EpisodeRecord",
     "HISTORY_COLUMNS",
     "LeanDDPG",

@@ -38,10 +38,10 @@ from typing import Protocol
 import numpy as np
 import torch
 
+from lonlib.config import LEARNERS
 from lonlib.ddpg.devices import to_device, to_host
 from lonlib.ddpg.reference import AutogradDDPG
 from lonlib.ddpg.streams import SIMD_PAD
-from lonlib.storage.configs import LEARNERS
 from lonlib.task.policy import NetSpec
 
 BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults, as the autograd reference uses

@@ -55,6 +55,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from lonlib.config import DDPGConfig, PendulumConfig, Scoring
+from lonlib.config.ddpg import check_judging, without_default_judging
 from lonlib.ddpg.devices import copy_to_device, host_tensor, to_device, to_host
 from lonlib.ddpg.lean import learner_class
 from lonlib.ddpg.plain_state import TensorReader
@@ -66,11 +68,10 @@ from lonlib.ddpg.streams import (
     WARMUP_ACTIONS,
     CounterStreams,
 )
-from lonlib.storage.configs import DDPGConfig, check_judging, without_default_judging
 from lonlib.task import compiled
-from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
+from lonlib.task.pendulum import CoupledPendulums, EndReason
 from lonlib.task.policy import NetSpec, actor_spec, critic_spec
-from lonlib.task.rollout import Scoring, score_actors
+from lonlib.task.rollout import score_actors
 from lonlib.util.plain_data import (
     StateLayoutError,
     config_from_plain,

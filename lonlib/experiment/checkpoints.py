@@ -54,9 +54,9 @@ from typing import Any
 
 import torch
 
+from lonlib.config import DDPGConfig, PendulumConfig
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.storage.atomic import atomic_write
-from lonlib.storage.configs import DDPGConfig
 from lonlib.storage.inflight import (
     FORMAT,
     ID,
@@ -69,7 +69,6 @@ from lonlib.storage.inflight import (
     refusal_reason,
 )
 from lonlib.storage.layout import Job
-from lonlib.task.pendulum import PendulumConfig
 from lonlib.util.plain_data import plain_dict, plain_float
 
 

@@ -20,7 +20,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from lonlib.storage.configs import EXECUTORS
+from lonlib.config import EXECUTORS
 from lonlib.storage.layout import Job
 
 Task = Callable[[float, int], Any]

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from lonlib.config import DDPGConfig
 from lonlib.ddpg.search_interface import local_optimum
 from lonlib.ddpg.trainer import SlotTrainer, check_batch_size
 from lonlib.experiment.checkpoints import (
@@ -47,7 +48,6 @@ from lonlib.experiment.checkpoints import (
 from lonlib.experiment.runs import experiment_plan, open_run, run_lock_path, run_summary
 from lonlib.search.algorithm import BasinHoppingRun, SearchRequest
 from lonlib.storage.atomic import DataWriteError
-from lonlib.storage.configs import DDPGConfig
 from lonlib.storage.inflight import (
     CheckpointUnreadable,
     InflightCheckpoint,

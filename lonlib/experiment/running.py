@@ -1,4 +1,4 @@
-"""Experiments: configurations (:mod:`lonlib.storage.configs`) -> basin-hopping runs, executed in
+"""Experiments: configurations (:mod:`lonlib.config.experiment`) -> basin-hopping runs, executed in
 this process, in local worker processes, on Dask or in lockstep batches.
 
 An :class:`ExperimentConfig` expands to ``runs`` independent basin-hopping runs for each
@@ -26,6 +26,7 @@ from typing import Any
 import pandas as pd
 from tqdm import tqdm
 
+from lonlib.config import ExperimentConfig
 from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.ddpg.trainer import check_device
 from lonlib.experiment.checkpoints import remove_inflight
@@ -38,9 +39,6 @@ from lonlib.storage.atomic import (
     check_output_folder,
     remove_temporary_files,
     write_json,
-)
-from lonlib.storage.configs import (
-    ExperimentConfig,
 )
 from lonlib.storage.inflight import checkpoint_lock_path, scan_inflight
 from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, run_dir

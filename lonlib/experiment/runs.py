@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from lonlib.config import ExperimentConfig
 from lonlib.search.algorithm import BasinHoppingRun, RunState, random_parameters
 from lonlib.storage.atomic import remove_temporary_files
-from lonlib.storage.configs import ExperimentConfig
 from lonlib.storage.inflight import Plan
 from lonlib.storage.layout import RUN_LOCK, read_manifest, run_dir
 from lonlib.storage.lock import LockHeld, exclusive_lock

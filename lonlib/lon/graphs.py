@@ -37,7 +37,7 @@ import pandas as pd
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from lonlib.storage.layout import p_label
+from lonlib.util.labels import p_label
 from lonlib.util.validation import check_choice, check_range
 
 EDGE_TYPES = ("improving", "equal", "worsening")

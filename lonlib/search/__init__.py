@@ -2,7 +2,6 @@
 
 from lonlib.search.algorithm import (
     AcceptTest,
-    BasinHoppingConfig,
     BasinHoppingRun,
     LocalOptimum,
     LocalSearch,
@@ -17,7 +16,6 @@ from lonlib.search.algorithm import (
 
 __all__ = [
     "AcceptTest",
-    "BasinHoppingConfig",
     "BasinHoppingRun",
     "LocalOptimum",
     "LocalSearch",

@@ -1,4 +1,4 @@
-"""What an experiment stores and how it is read back (no torch): configurations, the folder
+"""What an experiment stores and how it is read back (no torch): the folder
 layout, atomic storage of runs, the manifest, locks, provenance and the result-path version."""
 
 from lonlib.storage.atomic import (
@@ -8,7 +8,6 @@ from lonlib.storage.atomic import (
     read_json,
     write_json,
 )
-from lonlib.storage.configs import NAMED_CONFIGS, ExperimentConfig, load_config, named_config
 from lonlib.storage.layout import history_path, optimum_path, read_manifest, run_dir, trials_path
 from lonlib.storage.lock import LockHeld
 from lonlib.storage.manifest import manifest_path, session_seconds
@@ -25,17 +24,13 @@ from lonlib.storage.trials import (
 __all__ = [
     "CorruptDataError",
     "DataWriteError",
-    "ExperimentConfig",
     "LockHeld",
     "MissingExperimentError",
-    "NAMED_CONFIGS",
     "RESULT_PATH_VERSION",
     "experiment_digest",
     "experiment_status",
     "history_path",
-    "load_config",
     "manifest_path",
-    "named_config",
     "optimum_path",
     "read_experiment_trials",
     "read_finished_trials",

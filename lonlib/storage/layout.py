@@ -19,6 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from lonlib.storage.atomic import CorruptDataError, MissingExperimentError, read_json
+from lonlib.util.labels import p_label
 
 INFLIGHT_FOLDER = ".inflight"  # in the experiment folder: in-flight checkpoints
 RUN_LOCK = ".lock"  # in each run's folder: held by the one process writing the run
@@ -52,11 +53,6 @@ def checked_manifest(manifest: object, path: Path) -> dict:
     if not isinstance(manifest.get("config"), dict):
         raise CorruptDataError(f"{path}: not a manifest (its 'config' is not a JSON object)")
     return manifest
-
-
-def p_label(p: float) -> str:
-    """Folder-safe, exact label of a perturbation strength (``1e-04``)."""
-    return f"{p:.6g}".replace("e-0", "e-")
 
 
 def run_dir(root: Path, p: float, run: int) -> Path:

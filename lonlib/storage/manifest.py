@@ -36,7 +36,7 @@ from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.trials import runs_ending_early
 
 if TYPE_CHECKING:
-    from lonlib.storage.configs import ExperimentConfig
+    from lonlib.config import ExperimentConfig
 
 CHANGEABLE_FIELDS = ("max_local_searches",)
 """Settings a stored experiment may change when asked (``allow_changes``): a run's local

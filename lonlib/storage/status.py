@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.storage.configs import ExperimentConfig
+from lonlib.config import ExperimentConfig
 from lonlib.storage.inflight import inflight_checkpoints
 from lonlib.storage.layout import read_manifest, trials_path
 from lonlib.storage.trials import read_trials, replay_trials

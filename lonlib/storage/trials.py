@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lonlib.search.algorithm import BasinHoppingConfig, LocalOptimum, RunState, Trial
+from lonlib.config import BasinHoppingConfig
+from lonlib.search.algorithm import LocalOptimum, RunState, Trial
 from lonlib.storage.atomic import (
     CorruptDataError,
     atomic_write,

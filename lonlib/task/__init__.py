@@ -4,12 +4,11 @@ rollout that scores every policy, and behaviour descriptors (numpy only, no torc
 from lonlib.task.behaviour import BehaviourDescriptor, as_policy, describe, label, relabel
 from lonlib.task.controllers import SwingUpBalanceController
 from lonlib.task.env import ENV_ID, CoupledPendulumEnv, register_envs
-from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig, Policy
+from lonlib.task.pendulum import CoupledPendulums, EndReason, Policy
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 from lonlib.task.rollout import (
     Rollout,
     Scores,
-    Scoring,
     evaluate,
     nominal_offsets,
     perturbed_offsets,
@@ -24,11 +23,9 @@ __all__ = [
     "CoupledPendulums",
     "ENV_ID",
     "EndReason",
-    "PendulumConfig",
     "Policy",
     "Rollout",
     "Scores",
-    "Scoring",
     "SwingUpBalanceController",
     "actor_spec",
     "as_policy",

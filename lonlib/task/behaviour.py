@@ -22,10 +22,10 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from lonlib.task.pendulum import PendulumConfig, Policy
+from lonlib.config import PendulumConfig, Scoring
+from lonlib.task.pendulum import Policy
 from lonlib.task.rollout import (
     Rollout,
-    Scoring,
     actor_policy,
     conditioning_batch,
     nominal_offsets,

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from lonlib.task.pendulum import SENSORS_PER_CART, PendulumConfig
+from lonlib.config import PendulumConfig
+from lonlib.config.pendulum import SENSORS_PER_CART
 
 
 @dataclass(frozen=True)

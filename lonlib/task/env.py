@@ -1,7 +1,7 @@
 """Gymnasium facade over :class:`lonlib.task.pendulum.CoupledPendulums` (one environment).
 
 Registered as ``lonlib/CoupledPendulum-v1``; keyword arguments of ``gymnasium.make`` reach
-:class:`~lonlib.task.pendulum.PendulumConfig` (``gymnasium.make("lonlib/CoupledPendulum-v1",
+:class:`~lonlib.config.pendulum.PendulumConfig` (``gymnasium.make("lonlib/CoupledPendulum-v1",
 n_carts=1, reward="upright")``). Observation: normalised Table I sensors ``Box(0, 1, (10n,))``;
 action: one value per cart ``Box(0, 1, (n,))``; reward: the config's reward; ``terminated`` on
 collision / tether / boundary, ``truncated`` at ``config.steps``. ``info`` holds
@@ -23,7 +23,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
+from lonlib.config import PendulumConfig
+from lonlib.task.pendulum import CoupledPendulums, EndReason
 
 ENV_ID = "lonlib/CoupledPendulum-v1"
 DEPRECATED_ENV_ID = "lonlib/CoupledPendulum-v0"

@@ -1,4 +1,4 @@
-"""How a :class:`~lonlib.task.pendulum.PendulumConfig` reaches the compiled kernels: two small
+"""How a :class:`~lonlib.config.pendulum.PendulumConfig` reaches the compiled kernels: two small
 runtime arrays (:func:`pack`), so that one compilation serves every configuration, number of
 carts and batch. numba-free; :mod:`lonlib.task.kernels` reads the indices below."""
 
@@ -46,7 +46,7 @@ _REWARDS = {
 
 @functools.lru_cache(maxsize=64)
 def pack(config: Any) -> tuple[np.ndarray, np.ndarray]:
-    """``(fc, ic)``: a :class:`~lonlib.task.pendulum.PendulumConfig` as the kernels read it
+    """``(fc, ic)``: a :class:`~lonlib.config.pendulum.PendulumConfig` as the kernels read it
     (float64 and int64 arrays, the derived values computed as the numpy definition does)."""
     fc = np.empty(16)
     fc[F_GRAVITY] = config.gravity

@@ -32,19 +32,18 @@ from typing import Any
 
 import numpy as np
 
+from lonlib.config import PendulumConfig, Scoring
 from lonlib.task import compiled
-from lonlib.task.pendulum import CoupledPendulums, EndReason, PendulumConfig
+from lonlib.task.pendulum import CoupledPendulums, EndReason
 from lonlib.task.policy import NetSpec, actor_spec, forward_numpy
-from lonlib.util.validation import check_choice, check_field_types, check_range
+from lonlib.util.validation import check_range
 
 Policy = Callable[[np.ndarray], np.ndarray]
-ESTIMATES = ("nominal", "robust")
+
 
 __all__ = [
-    "ESTIMATES",
     "Rollout",
     "Scores",
-    "Scoring",
     "Trace",
     "evaluate",
     "nominal_offsets",
@@ -274,36 +273,6 @@ def evaluate(
         rng = np.random.default_rng(seed)
         offsets = rng.uniform(-config.initial_noise, config.initial_noise, (4, batch_size, n))
     return run_policy(policy, config, offsets)
-
-
-@dataclass(frozen=True)
-class Scoring:
-    """How a policy is scored: what Algorithm 2 compares and what the LON's nodes carry.
-
-    The fitness is always Algorithm 1 under the environment's ``fitness_mode``; this says
-    from which starts.
-    """
-
-    estimate: str = "nominal"
-    """``nominal``: Algorithm 1 from the nominal start (the paper). ``robust``: the mean over
-    ``starts`` perturbed starts (:func:`perturbed_offsets`), a fitness that a rounding in the
-    start cannot flip."""
-    starts: int = 8
-    """``M``, the number of perturbed starts of the conditioning (and of ``robust``)."""
-    noise: float = 0.01
-    """Half-width of the uniform start perturbation, on x, x_dot, phi and phi_dot."""
-    seed: int = 0
-    """Seed of the perturbed starts' draw (the same starts for every policy)."""
-    eval_seed: int = 0
-    """Seed of the nominal start's draw (used only when ``initial_noise`` > 0)."""
-
-    def __post_init__(self) -> None:
-        check_field_types(self)
-        check_choice("fitness_estimate", self.estimate, ESTIMATES)
-        check_range("robust_starts", self.starts, 1, 100_000)
-        check_range("robust_noise", self.noise, 0.0, 0.5)
-        check_range("robust_seed", self.seed, 0, 2**63 - 1)
-        check_range("eval_seed", self.eval_seed, 0, 2**63 - 1)
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from lonlib.util.cpu_kernels import (
     pin_torch_cpu_kernels,
     torch_cpu_capability,
 )
+from lonlib.util.labels import p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.paths import project_path, project_root
 from lonlib.util.progress import progress_bar
@@ -18,6 +19,7 @@ __all__ = [
     "check_choice",
     "check_range",
     "expected_torch_capability",
+    "p_label",
     "pin_torch_cpu_kernels",
     "progress_bar",
     "project_path",
