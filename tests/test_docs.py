@@ -344,7 +344,8 @@ def _code(text: str) -> list[str]:
 def documented_names() -> list[tuple[str, str]]:
     found = set()
     for path in [README, *PAGES]:
-        for code in _code(path.read_text()):
+        text = path.read_text()
+        for code in [text, *_code(text)]:  # the prose too, and spans broken across lines
             for name in DOTTED.findall(code):
                 found.add((str(path.relative_to(ROOT)), name))
     return sorted(found)
@@ -391,6 +392,34 @@ def test_the_name_check_sees_the_docs_names_and_fails_on_an_old_path():
 @pytest.mark.parametrize(("source", "name"), NAMES, ids=[f"{s}:{n}" for s, n in NAMES])
 def test_a_documented_dotted_name_resolves(source, name):
     assert resolves(name), f"{source}: {name} is an old name, or neither a module nor an attribute"
+
+
+# A file or folder of the package named in the docs (``lonlib/task/pendulum.py``); the
+# environment id ``lonlib/CoupledPendulum-v1`` has capitals, so it is not one.
+PACKAGE_PATH = re.compile(r"\blonlib/[a-z_][a-z0-9_/]*(?:\.py)?\b")
+
+
+def documented_paths() -> list[tuple[str, str]]:
+    found = set()
+    for path in [README, *PAGES]:
+        for name in PACKAGE_PATH.findall(path.read_text()):
+            found.add((str(path.relative_to(ROOT)), name.rstrip("/")))
+    return sorted(found)
+
+
+PATHS = documented_paths()
+
+
+def test_the_path_check_sees_the_docs_paths():
+    assert ("docs/model.md", "lonlib/task/pendulum.py") in PATHS
+    assert PACKAGE_PATH.findall("`lonlib/result_path.py` and lonlib/CoupledPendulum-v1") == [
+        "lonlib/result_path.py"
+    ]
+
+
+@pytest.mark.parametrize(("source", "path"), PATHS, ids=[f"{s}:{p}" for s, p in PATHS])
+def test_a_documented_package_path_exists(source, path):
+    assert (ROOT / path).exists(), f"{source}: {path} is not a file or folder of the tree"
 
 
 def test_the_docs_name_the_current_environment_id():
