@@ -187,17 +187,20 @@ for name in ("rollout", "step_batch", "observe_batch", "exp", "sin_cos", "sigmoi
     text = "".join(getattr(kernels, name).inspect_asm().values())
     fused = sum(text.count(op) for op in ("vfmadd", "vfmsub", "vfnmadd", "vfnmsub"))
     found[name] = [len(text), fused]
+found["backend"] = compiled.backend()
 print(json.dumps(found))
 """
 
 
 def test_the_compiled_code_has_no_fused_multiply_add(tmp_path):
-    # compiled afresh (no cache: cached code cannot be inspected), for this CPU
+    # compiled afresh, for this CPU: without a writable cache folder the kernels still load
+    # (and code loaded from a cache cannot be inspected)
     blocker = tmp_path / "file"
     blocker.write_text("no cache")
     found = run_script(
         {compiled.CACHE_VARIABLE: str(blocker), compiled.ROLLOUT_VARIABLE: "numba"}, FMA_SCRIPT
     )
+    assert found.pop("backend") == "numba"
     assert all(size > 1000 for size, _ in found.values()), found
     assert all(fused == 0 for _, fused in found.values()), found
 
@@ -275,13 +278,6 @@ def test_a_bad_rollout_choice_is_refused_by_name(monkeypatch):
     monkeypatch.setenv(compiled.ROLLOUT_VARIABLE, "cuda")
     with pytest.raises(ValueError, match="LONLIB_ROLLOUT must be one of"):
         run_actors(actor_spec(1).initial(np.random.default_rng(0)), PendulumConfig(n_carts=1))
-
-
-def test_no_writable_cache_folder_compiles_without_a_cache(tmp_path):
-    blocker = tmp_path / "file"
-    blocker.write_text("not a folder")
-    result = run_script({compiled.CACHE_VARIABLE: str(blocker), compiled.ROLLOUT_VARIABLE: "numba"})
-    assert result["backend"] == "numba"
 
 
 def test_the_cache_folder_is_keyed_by_version_and_kernel_sources(tmp_path, monkeypatch):
