@@ -304,3 +304,19 @@ def test_importing_lonlib_and_its_analysis_does_not_import_numba():
         check=True,
     )
     assert out.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_training_rollouts_use_torchs_threads_on_the_cpu_never_more():
+    import numba
+
+    from lonlib.ddpg import DDPGConfig
+    from lonlib.ddpg.trainer import SlotTrainer
+    from lonlib.task.policy import critic_spec
+
+    rng = np.random.default_rng(0)
+    env = PendulumConfig(n_carts=1, steps=50)
+    thetas = actor_spec(1).initial(rng)[None]
+    omegas = critic_spec(1).initial(rng)[None]
+    for threads in (2, 1):
+        SlotTrainer(thetas, omegas, [0], env, DDPGConfig(batch_size=8, threads=threads))
+        assert numba.get_num_threads() == min(threads, numba.config.NUMBA_NUM_THREADS)
