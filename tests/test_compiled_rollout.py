@@ -485,3 +485,21 @@ def test_bad_traces_and_actor_counts_are_refused_by_both_rollouts(monkeypatch):
             run_actors(thetas, config, perturbed_offsets(config, 5, 0.01))
         with pytest.raises(ValueError, match="trace must be"):
             run_actors(thetas, config, perturbed_offsets(config, 3, 0.01), trace=-1)
+
+
+def test_a_rollout_from_another_thread_uses_the_count_set_not_every_core():
+    import threading
+
+    import numba
+
+    seen = []
+    compiled.set_threads(1)
+
+    def work():
+        run_actors(actor_spec(1).initial(np.random.default_rng(0)), PendulumConfig(n_carts=1))
+        seen.append(numba.get_num_threads())
+
+    thread = threading.Thread(target=work)
+    thread.start()
+    thread.join()
+    assert seen == [1]

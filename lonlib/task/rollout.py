@@ -189,6 +189,7 @@ def _run_compiled(module: Any, policy: ActorPolicy, sim: CoupledPendulums, kept:
         raise ValueError(f"{thetas.shape[0]} Actors for {batch} starts: give one or one per start")
     which = np.arange(batch) if thetas.shape[0] == batch else np.zeros(batch, dtype=np.int64)
     fc, ic = compiled.pack(sim.config)
+    compiled.apply_threads()
     sizes = np.array(policy.spec.sizes, dtype=np.int64)
     out = module.rollout_actors(fc, ic, sizes, thetas, which, sim._state_arrays(), kept)
     steps = sim.config.steps
