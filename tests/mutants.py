@@ -922,16 +922,23 @@ def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
 
 
 def main(argv: list[str]) -> int:
-    """Run every mutant (``--jobs N`` at a time; a word filters by description)."""
-    jobs = 1
+    """Run every mutant (``--jobs N`` at a time; a word filters by description, ``--path
+    TEXT`` by the mutated file's path)."""
+    jobs, where = 1, ""
     if "--jobs" in argv:
         at = argv.index("--jobs")
         jobs = int(argv[at + 1])
         argv = argv[:at] + argv[at + 2 :]
+    if "--path" in argv:
+        at = argv.index("--path")
+        where = argv[at + 1]
+        argv = argv[:at] + argv[at + 2 :]
     if argv and argv[0] in ("-h", "--help"):
-        print(__doc__.strip() + "\n\nusage: python tests/mutants.py [WORDS] [--jobs N]")
+        print(
+            __doc__.strip() + "\n\nusage: python tests/mutants.py [WORDS] [--path TEXT] [--jobs N]"
+        )
         return 0
-    selected = [m for m in MUTANTS if not argv or argv[0] in m.why]
+    selected = [m for m in MUTANTS if (not argv or argv[0] in m.why) and where in str(m.path)]
     with tempfile.TemporaryDirectory(prefix="lonlib-mutants-") as tmp:
         free: queue.Queue[Path] = queue.Queue()
         for slot in range(jobs):
