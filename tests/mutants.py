@@ -49,6 +49,7 @@ ROLLOUT, NETS, PMATH = (
 BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
+KERNELS = "lonlib/task/kernels.py"
 STUDY = "lonlib/calibration/study.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
@@ -78,15 +79,17 @@ GUARDS = {
     ],
     AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
     BH: ["tests/test_basin_hopping.py"],
-    SIM: ["tests/test_pendulum.py", "tests/test_rollout.py"],
+    # the numpy definition is the kernels' oracle: only test_compiled_rollout runs it
+    SIM: ["tests/test_pendulum.py", "tests/test_rollout.py", "tests/test_compiled_rollout.py"],
     ROLLOUT: [*ONE_ROLLOUT, "tests/test_study.py"],
-    NETS: ["tests/test_nets.py", *ONE_ROLLOUT],
-    PMATH: ONE_ROLLOUT,
+    NETS: ["tests/test_nets.py", *ONE_ROLLOUT, "tests/test_compiled_rollout.py"],
+    PMATH: [*ONE_ROLLOUT, "tests/test_compiled_rollout.py"],
     BEHAVIOUR: ["tests/test_behaviour.py", *ONE_ROLLOUT, "tests/test_calibration.py"],
     VERIFY: ["tests/test_verify.py"],
     STUDY: ["tests/test_study.py"],
     HOLDING: ["tests/test_holding.py", "tests/test_verify.py"],
     POWER: ["tests/test_claims_power.py"],
+    KERNELS: ["tests/test_compiled_rollout.py"],
 }
 
 MUTANTS = [
@@ -748,8 +751,8 @@ MUTANTS = [
     ),
     Mutant(
         PMATH,
-        "r = (x - k * _LN2_HI) - k * _LN2_LO",
-        "r = x - k * _LN2_HI",
+        "r = (x - k * LN2_HI) - k * LN2_LO",
+        "r = x - k * LN2_HI",
         "one-rollout: exp's range reduction",
     ),
     Mutant(
@@ -842,6 +845,55 @@ MUTANTS = [
         "low = clopper_pearson(keys // (n + 1), keys % (n + 1), CONFIDENCE)[0][inverse]",
         "power: claim b's intervals of other pairs",
     ),
+    # --- the compiled rollout (lonlib.task.kernels): its numpy definition is the oracle
+    Mutant(
+        KERNELS,
+        "        m = math.copysign(0.0, b)",
+        "        m = m",
+        "kernels: mod keeps fmod's -0.0",
+    ),
+    Mutant(
+        KERNELS,
+        "    truncated = (not terminated) and steps_done >= ic[I_STEPS]",
+        "    truncated = steps_done >= ic[I_STEPS]",
+        "kernels: an end on the last step read as the step limit",
+    ),
+    Mutant(
+        KERNELS,
+        "    if tether:\n        reason = TETHER\n    if collision:\n        reason = COLLISION",
+        "    if collision:\n        reason = COLLISION\n    if tether:\n        reason = TETHER",
+        "kernels: tether before collision",
+    ),
+    Mutant(
+        KERNELS,
+        "gap > fc[F_TETHER]",
+        "gap >= fc[F_TETHER]",
+        "kernels: a gap of exactly the tether breaks it",
+    ),
+    Mutant(
+        KERNELS,
+        "                trace_upright[s, b] = False",
+        "                trace_upright[s, b] = upright_each",
+        "kernels: an ended row's trace keeps its last upright flags",
+    ),
+    Mutant(
+        KERNELS,
+        "            reward[b] = (shaped + fc[F_PENALTY] * 0.0) * 0.0",
+        "            reward[b] = 0.0",
+        "kernels: an ended NaN row's reward is 0, not numpy's NaN",
+    ),
+    Mutant(
+        KERNELS,
+        "            height = height * (1.0 - _minimum(speed, 1.0))",
+        "            height = height * (1.0 - speed)",
+        "kernels: slow-height's speed not capped at the sensor range",
+    ),
+    Mutant(
+        KERNELS,
+        "upright_each[c] = cos > fc[F_COS_UPRIGHT]",
+        "upright_each[c] = cos >= fc[F_COS_UPRIGHT]",
+        "kernels: a rod exactly at the upright angle counted upright",
+    ),
 ]
 
 
@@ -870,16 +922,23 @@ def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
 
 
 def main(argv: list[str]) -> int:
-    """Run every mutant (``--jobs N`` at a time; a word filters by description)."""
-    jobs = 1
+    """Run every mutant (``--jobs N`` at a time; a word filters by description, ``--path
+    TEXT`` by the mutated file's path)."""
+    jobs, where = 1, ""
     if "--jobs" in argv:
         at = argv.index("--jobs")
         jobs = int(argv[at + 1])
         argv = argv[:at] + argv[at + 2 :]
+    if "--path" in argv:
+        at = argv.index("--path")
+        where = argv[at + 1]
+        argv = argv[:at] + argv[at + 2 :]
     if argv and argv[0] in ("-h", "--help"):
-        print(__doc__.strip() + "\n\nusage: python tests/mutants.py [WORDS] [--jobs N]")
+        print(
+            __doc__.strip() + "\n\nusage: python tests/mutants.py [WORDS] [--path TEXT] [--jobs N]"
+        )
         return 0
-    selected = [m for m in MUTANTS if not argv or argv[0] in m.why]
+    selected = [m for m in MUTANTS if (not argv or argv[0] in m.why) and where in str(m.path)]
     with tempfile.TemporaryDirectory(prefix="lonlib-mutants-") as tmp:
         free: queue.Queue[Path] = queue.Queue()
         for slot in range(jobs):

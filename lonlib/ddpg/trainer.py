@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -326,9 +327,11 @@ class SlotTrainer:
         self.env_config, self.hp, self.n = env_config, hp, env_config.n_carts
         self.a_spec, self.c_spec = actor_spec(self.n), critic_spec(self.n)
         torch.set_num_threads(hp.threads)  # the thread count can change float reductions
-        # the greedy rollouts between updates use the same cores (their rows in parallel;
-        # each row's bits do not depend on it), never more than torch's
-        compiled.set_threads(hp.threads)
+        # The greedy rollouts between updates run their rows in parallel (a row's bits do not
+        # depend on it): on the CPU on torch's threads, never more; beside a GPU on every
+        # core this process may use, idle while the card trains.
+        on_cpu = torch.device(device).type == "cpu"
+        compiled.set_threads(hp.threads if on_cpu else len(os.sched_getaffinity(0)))
         self.device = torch.device(device)
 
     def _allocate_slots(self, k: int) -> None:

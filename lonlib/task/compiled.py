@@ -14,7 +14,7 @@ tests compare the kernels with. Both give the same bits (docs/rollout.md says wh
   ``$XDG_CACHE_HOME/lonlib`` or ``~/.cache/lonlib``) ``/numba/<lonlib version>-<hash of the
   kernel sources>``, because numba's own invalidation follows only the decorated file's time
   stamp (an edited callee in another file would stay stale). No writable folder: the kernels
-  compile without a cache (a few seconds per process), never an import error.
+  compile without a cache (about 20 s per process here), never an import error.
 * Intel SVML is switched off (``NUMBA_DISABLE_INTEL_SVML``) before numba is imported.
 
 The configuration reaches the kernels as two small arrays (:func:`pack`), so one compilation
@@ -44,6 +44,7 @@ _SOURCES = ("kernels.py", "kernel_config.py")
 
 _lock = threading.Lock()
 _loaded: dict[str, ModuleType | None] = {}
+_threads = {"count": 1}
 
 
 def requested() -> str | None:
@@ -116,7 +117,7 @@ def _load(required: bool) -> ModuleType | None:
             numba.config.CACHE_DIR = str(folder)
         from lonlib.task import kernels as module
 
-        numba.set_num_threads(1)  # set_threads spreads rows wider where asked
+        numba.set_num_threads(_threads["count"])  # 1 unless set_threads spread rows wider
         module.warm_up()
         return module
     except Exception as error:  # numba missing, or a kernel failing to compile
@@ -140,13 +141,24 @@ def backend() -> str:
 
 def set_threads(threads: int) -> int:
     """Spread a batched rollout's rows over ``threads`` threads (numba's ``prange``; at most
-    numba's thread count); returns the count set. Default 1, so that processes running side
-    by side (a pool, Dask workers, torch's own threads) are never oversubscribed."""
+    numba's thread count), in every thread of this process that runs a rollout from now on;
+    returns the count set. Default 1, so that processes running side by side (a pool, Dask
+    workers, torch's own threads) are never oversubscribed."""
     module = kernels()
     if module is None:
         return 1
     import numba
 
-    count = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
-    numba.set_num_threads(count)
-    return count
+    _threads["count"] = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(_threads["count"])
+    return _threads["count"]
+
+
+def apply_threads() -> None:
+    """Give the calling thread the count of :func:`set_threads` (numba's count is per
+    thread: a rollout started from another thread, e.g. a Dask worker's, would otherwise use
+    every core)."""
+    import numba
+
+    if numba.get_num_threads() != _threads["count"]:
+        numba.set_num_threads(_threads["count"])

@@ -608,11 +608,18 @@ def rollout_actors(
         "upright": np.zeros((steps, kept, n), dtype=np.bool_),
         "fitness": np.zeros((steps, kept)),
     }
-    rollout(
-        fc, ic, sizes, thetas, which, *(np.ascontiguousarray(s) for s in start),
-        out["sums"], out["end_reason"], out["end_step"], out["episode_return"],
-        state, trace["sensors"], trace["actions"], trace["upright"], trace["fitness"],
-    )  # fmt: skip
+    try:
+        rollout(
+            fc, ic, sizes, thetas, which, *(np.ascontiguousarray(s) for s in start),
+            out["sums"], out["end_reason"], out["end_step"], out["episode_return"],
+            state, trace["sensors"], trace["actions"], trace["upright"], trace["fitness"],
+        )  # fmt: skip
+    except SystemError as error:
+        # numba's parallel loop reports what a row raised (a diverging episode's sin/cos
+        # argument beyond 1e5) as a SystemError: raise it as the numpy definition does
+        if isinstance(error.__cause__, ValueError):
+            raise ValueError(f"{error.__cause__} (an episode diverged)") from error.__cause__
+        raise
     if kept:
         longest = int(out["end_step"].max())
         for i, name in enumerate(("x", "x_dot", "phi", "phi_dot")):

@@ -137,6 +137,11 @@ def run_policy(
     sim = CoupledPendulums(config, offsets.shape[1])
     sim.reset(noise=offsets)
     kept_rows = sim.batch_size if trace is True else int(trace)
+    if kept_rows < 0:
+        raise ValueError(f"trace must be a bool or a number of rows >= 0, got {trace!r}")
+    actors = len(np.atleast_2d(policy.thetas)) if isinstance(policy, ActorPolicy) else 1
+    if actors not in (1, sim.batch_size):
+        raise ValueError(f"{actors} Actors for {sim.batch_size} starts: give one or one per start")
     module = compiled.kernels() if isinstance(policy, ActorPolicy) else None
     if module is not None:
         return _run_compiled(module, policy, sim, min(kept_rows, sim.batch_size))
@@ -183,6 +188,7 @@ def _run_compiled(module: Any, policy: ActorPolicy, sim: CoupledPendulums, kept:
         raise ValueError(f"{thetas.shape[0]} Actors for {batch} starts: give one or one per start")
     which = np.arange(batch) if thetas.shape[0] == batch else np.zeros(batch, dtype=np.int64)
     fc, ic = compiled.pack(sim.config)
+    compiled.apply_threads()
     sizes = np.array(policy.spec.sizes, dtype=np.int64)
     out = module.rollout_actors(fc, ic, sizes, thetas, which, sim._state_arrays(), kept)
     steps = sim.config.steps
