@@ -456,3 +456,12 @@ def test_the_python_examples_are_found_and_only_long_ones_are_skipped():
     assert {"README.md", "docs/rollout.md", "docs/ddpg.md"} <= sources
     skipped = [source for source, _, block in EXAMPLES if block.startswith(NOT_RUN)]
     assert skipped == ["docs/ddpg.md"]  # DDPG trains for minutes
+
+
+def test_the_fitness_scale_table_is_what_the_committed_data_give():
+    from lonlib.analysis.fitness_scale import BEGIN, END, fitness_scale_markdown
+    from lonlib.util.readme_tables import splice
+
+    page = (ROOT / "docs" / "results.md").read_text()
+    assert splice(page, BEGIN, END, fitness_scale_markdown(ROOT)) == page
+    assert splice(page, BEGIN, END, "another table") != page
