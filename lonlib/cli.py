@@ -303,7 +303,19 @@ def _verify(args: argparse.Namespace) -> None:
     if len(shown) < len(report.findings):
         print(f"... {len(report.findings) - len(shown)} more (--all shows every finding)")
     print(report.summary())
-    if not report.ok:
+    failed = not report.ok
+    if args.gymnasium:
+        from lonlib.storage.policies import gymnasium_mismatches
+
+        replayed, mismatches = gymnasium_mismatches(root)
+        for line in mismatches[: len(mismatches) if args.all else args.limit]:
+            print(f"[gymnasium] {line}")
+        print(
+            f"gymnasium: {replayed - len(mismatches)} of {replayed} accepted optima replay "
+            "their stored fitness through gymnasium.make (float64 observations)"
+        )
+        failed = failed or bool(mismatches)
+    if failed:
         raise SystemExit(1)
     return None
 
@@ -533,6 +545,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--limit", type=int, default=20, help="findings printed (0: none; default 20)"
     )
     verify.add_argument("--all", action="store_true", help="print every finding")
+    verify.add_argument(
+        "--gymnasium",
+        action="store_true",
+        help="also replay every accepted optimum through gymnasium.make (float64 "
+        "observations, lonlib.storage.load_policy) and require its stored fitness",
+    )
     verify.set_defaults(func=_verify)
 
     thin = sub.add_parser(

@@ -11,6 +11,7 @@ from lonlib.storage.atomic import (
 from lonlib.storage.layout import history_path, optimum_path, read_manifest, run_dir, trials_path
 from lonlib.storage.lock import LockHeld
 from lonlib.storage.manifest import manifest_path, session_seconds
+from lonlib.storage.policies import StoredPolicy, load_policy
 from lonlib.storage.result_path import RESULT_PATH_VERSION, experiment_digest
 from lonlib.storage.status import experiment_status
 from lonlib.storage.thin import thin_histories
@@ -27,9 +28,11 @@ __all__ = [
     "LockHeld",
     "MissingExperimentError",
     "RESULT_PATH_VERSION",
+    "StoredPolicy",
     "experiment_digest",
     "experiment_status",
     "history_path",
+    "load_policy",
     "manifest_path",
     "optimum_path",
     "read_experiment_trials",

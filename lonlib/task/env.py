@@ -8,6 +8,12 @@ collision / tether / boundary, ``truncated`` at ``config.steps``. ``info`` holds
 ``end_reason`` (an :class:`~lonlib.task.pendulum.EndReason` name), ``fitness`` (running
 Algorithm 1 fitness) and ``upright`` (this step's fitness increment).
 
+Observations are float32 by default (Gymnasium's convention, what RL libraries expect); with
+``observation_dtype="float64"`` they are the simulator's sensors exactly, so that a stored
+optimum (:func:`lonlib.storage.load_policy`) replays its stored fitness bit for bit: rounding
+the sensors to float32 changes a chaotic episode (docs/rollout.md, "Replaying an optimum
+outside lonlib").
+
 Versions (Gymnasium bumps an id's version when its results change): ``v1`` has the calibrated
 default physics (velocity motor, semi-implicit Euler); ``v0`` was registered before that
 change. ``v0`` stays registered, makes the same environment as ``v1`` and warns
@@ -27,6 +33,7 @@ from lonlib.config import PendulumConfig
 from lonlib.task.pendulum import CoupledPendulums, EndReason
 
 ENV_ID = "lonlib/CoupledPendulum-v1"
+OBSERVATION_DTYPES = ("float32", "float64")
 DEPRECATED_ENV_ID = "lonlib/CoupledPendulum-v0"
 
 
@@ -35,14 +42,22 @@ class CoupledPendulumEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
 
-    def __init__(self, render_mode: str | None = None, **config: Any) -> None:
+    def __init__(
+        self, render_mode: str | None = None, observation_dtype: str = "float32", **config: Any
+    ) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if observation_dtype not in OBSERVATION_DTYPES:
+            raise ValueError(
+                f"observation_dtype must be one of {list(OBSERVATION_DTYPES)}, "
+                f"got {observation_dtype!r}"
+            )
         self.config = PendulumConfig(**config)
         self.render_mode = render_mode
+        self.observation_dtype = np.dtype(observation_dtype)
         n = self.config.n_carts
         self.observation_space = gym.spaces.Box(
-            0.0, 1.0, shape=(self.config.observation_size,), dtype=np.float32
+            0.0, 1.0, shape=(self.config.observation_size,), dtype=self.observation_dtype
         )
         self.action_space = gym.spaces.Box(0.0, 1.0, shape=(n,), dtype=np.float32)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.config.dt)}
@@ -78,7 +93,7 @@ class CoupledPendulumEnv(gym.Env):
         return render_frame(self.config, self._sim.x[0], self._sim.phi[0])
 
     def _observation(self) -> np.ndarray:
-        return self._sim.observe()[0].astype(np.float32)
+        return self._sim.observe()[0].astype(self.observation_dtype)
 
     def _info(self, upright: float) -> dict[str, Any]:
         return {
