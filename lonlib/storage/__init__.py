@@ -12,6 +12,7 @@ from lonlib.storage.layout import history_path, optimum_path, read_manifest, run
 from lonlib.storage.lock import LockHeld
 from lonlib.storage.manifest import manifest_path, session_seconds
 from lonlib.storage.result_path import RESULT_PATH_VERSION, experiment_digest
+from lonlib.storage.session import SamplingSession
 from lonlib.storage.status import experiment_status
 from lonlib.storage.thin import thin_histories
 from lonlib.storage.trials import (
@@ -27,6 +28,7 @@ __all__ = [
     "LockHeld",
     "MissingExperimentError",
     "RESULT_PATH_VERSION",
+    "SamplingSession",
     "experiment_digest",
     "experiment_status",
     "history_path",
