@@ -6,7 +6,7 @@ from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import claims_markdown
 from lonlib.analysis.conditioning import conditioning_by_label
 from lonlib.analysis.holding import CHATTER_TOLERANT, holding_markdown, holding_summary
-from lonlib.analysis.landscape import Landscape, landscapes
+from lonlib.analysis.landscape import Landscape, StoredExperiment, landscapes
 from lonlib.analysis.peaks import detect_peaks
 from lonlib.analysis.pipeline import (
     Analysis,
@@ -25,6 +25,7 @@ __all__ = [
     "CHATTER_TOLERANT",
     "Claim",
     "Landscape",
+    "StoredExperiment",
     "VerifyReport",
     "analyse",
     "claims_from_trials",

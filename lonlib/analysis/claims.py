@@ -641,7 +641,17 @@ def claims_from_trials(
     seed: int = BOOTSTRAP_SEED,
 ) -> pd.DataFrame:
     """The claims table of stored trials (see the module docstring), rows a to e."""
-    by_p = landscapes(trials, fitness_tolerance)
+    return claims_of_landscapes(landscapes(trials, fitness_tolerance), bins, resamples, seed)
+
+
+def claims_of_landscapes(
+    by_p: dict[float, Landscape],
+    bins: int = 50,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> pd.DataFrame:
+    """:func:`claims_from_trials` of an experiment's landscapes (one per p, in increasing p:
+    :func:`~lonlib.analysis.landscape.landscapes`, or a loaded experiment's)."""
     land = by_p[examined_p(list(by_p))]
     rows = [
         claim_multimodal(land, bins, resamples, seed),
@@ -659,7 +669,11 @@ def peaks_beside_paper(
     """At the examined p, each of the paper's peaks beside the nearest peak detected in the
     sink histogram (Fig. 4) and in the optima histogram (Fig. 5), with their distance and
     the histogram's number of values (``values``: with few, every peak is one optimum)."""
-    by_p = landscapes(trials, fitness_tolerance)
+    return peaks_of_landscapes(landscapes(trials, fitness_tolerance), bins)
+
+
+def peaks_of_landscapes(by_p: dict[float, Landscape], bins: int = 50) -> pd.DataFrame:
+    """:func:`peaks_beside_paper` of an experiment's landscapes (one per p)."""
     land = by_p[examined_p(list(by_p))]
     tables = [
         compare_with_paper(detect_peaks(values, bins=bins)).assign(

@@ -1,15 +1,21 @@
-"""One p of a stored experiment as the analysis reads it (:class:`Landscape`): its trials, its
-LON, the fitness of its sinks and of all its optima, and each run's best."""
+"""A stored experiment as the analysis reads it (:class:`StoredExperiment`: its configuration and
+trials, loaded once) and each p of it (:class:`Landscape`: its trials, its LON, the fitness of
+its sinks and of all its optima, and each run's best), each p's LON built once."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
 
 import networkx as nx
 import numpy as np
 import pandas as pd
 
+from lonlib.config import ExperimentConfig
 from lonlib.lon.graphs import build_lon, sinks
+from lonlib.storage.layout import read_manifest
+from lonlib.storage.trials import read_finished_trials
 
 
 @dataclass(frozen=True)
@@ -46,3 +52,28 @@ def landscapes(trials: pd.DataFrame, fitness_tolerance: float = 1e-9) -> dict[fl
             trials=group,
         )
     return out
+
+
+@dataclass
+class StoredExperiment:
+    """An experiment folder loaded once: its stored configuration, its finished trials and
+    (:attr:`landscapes`, on first use) one :class:`Landscape` per p, the LON of each p built
+    once at ``fitness_tolerance`` for every figure, table and claim."""
+
+    folder: Path
+    config: ExperimentConfig
+    trials: pd.DataFrame
+    fitness_tolerance: float = 1e-9
+
+    @classmethod
+    def load(cls, folder: str | Path, fitness_tolerance: float = 1e-9) -> StoredExperiment:
+        """The experiment stored in ``folder`` (its manifest's configuration, its trials)."""
+        folder = Path(folder)
+        trials = read_finished_trials(folder)
+        config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
+        return cls(folder, config, trials, fitness_tolerance)
+
+    @cached_property
+    def landscapes(self) -> dict[float, Landscape]:
+        """One :class:`Landscape` per stored p, in increasing p (built on first use)."""
+        return landscapes(self.trials, self.fitness_tolerance)
