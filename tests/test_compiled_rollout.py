@@ -318,7 +318,7 @@ def test_importing_lonlib_and_its_analysis_does_not_import_numba():
 def test_training_rollouts_use_torchs_threads_on_the_cpu_never_more():
     import numba
 
-    from lonlib.ddpg import DDPGConfig
+    from lonlib.config import DDPGConfig
     from lonlib.ddpg.trainer import SlotTrainer
     from lonlib.task.policy import critic_spec
 
