@@ -60,7 +60,7 @@ help:
 	@echo "make docs    set up, then build the documentation site into site/ (offline, --strict;"
 	@echo "             tests/test_docs.py builds it in make test)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
-	@echo "make lint    ruff check + ruff format --check"
+	@echo "make lint    ruff check + ruff format --check + mypy (strict on [tool.mypy]'s files)"
 	@echo "make clean   remove $(VENV), $(LATEST) and caches (never data/)"
 
 $(BIN)/python:
@@ -139,6 +139,7 @@ test-browser: $(VENV)/.lab-installed
 lint: setup
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/python -m mypy
 
 format: setup
 	$(BIN)/ruff format .

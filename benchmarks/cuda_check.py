@@ -41,7 +41,8 @@ import numpy as np
 import torch
 
 from lonlib.config import DDPGConfig, PendulumConfig
-from lonlib.ddpg.trainer import SlotTrainer, make_learner
+from lonlib.ddpg.learner import make_learner
+from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.task.policy import actor_spec, critic_spec
 
 ENV = PendulumConfig(n_carts=2)

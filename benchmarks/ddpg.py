@@ -19,9 +19,9 @@ import torch
 
 from benchmarks.common import RESULTS, report
 from lonlib.config import DDPGConfig, PendulumConfig
-from lonlib.ddpg.lean import learner_class
+from lonlib.ddpg.learner import learner_class
 from lonlib.ddpg.replay import ReplayBuffer
-from lonlib.ddpg.trainer import local_search
+from lonlib.ddpg.search import local_search
 from lonlib.task.policy import actor_spec, critic_spec
 
 HP = DDPGConfig(warmup_steps=2000, min_steps=0, patience_steps=10**9)

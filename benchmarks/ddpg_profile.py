@@ -22,7 +22,7 @@ from torch.profiler import ProfilerActivity, profile
 
 from benchmarks.ddpg import ENV, make_update
 from lonlib.config import DDPGConfig
-from lonlib.ddpg.trainer import local_search_batch
+from lonlib.ddpg.search import local_search_batch
 from lonlib.task.policy import actor_spec, critic_spec
 
 

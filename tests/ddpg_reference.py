@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from lonlib.config import DDPGConfig
-from lonlib.ddpg.trainer import make_learner
+from lonlib.ddpg.learner import make_learner
 from lonlib.task.policy import NetSpec
 
 

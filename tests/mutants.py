@@ -35,6 +35,7 @@ class Mutant:
 
 
 DDPG, BH, SIM = "lonlib/ddpg/trainer.py", "lonlib/search/algorithm.py", "lonlib/task/pendulum.py"
+SLOTS, TRAINER_CHECKPOINT = "lonlib/ddpg/slots.py", "lonlib/ddpg/checkpoint.py"
 LEAN, AUTOGRAD = "lonlib/ddpg/lean.py", "lonlib/ddpg/reference.py"
 REPLAY, STREAMS, LOCKSTEP = (
     "lonlib/ddpg/replay.py",
@@ -59,6 +60,19 @@ GUARDS = {
         "tests/test_devices.py",
         "tests/test_lockstep.py",
         "tests/test_study.py",
+    ],
+    SLOTS: [
+        "tests/test_ddpg.py",
+        "tests/test_devices.py",
+        "tests/test_lockstep.py",
+        "tests/test_study.py",
+    ],
+    TRAINER_CHECKPOINT: [
+        "tests/test_ddpg.py",
+        "tests/test_devices.py",
+        "tests/test_lockstep.py",
+        "tests/test_study.py",
+        "tests/test_inflight.py",
     ],
     REPLAY: ["tests/test_devices.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
     STREAMS: [
@@ -126,7 +140,7 @@ MUTANTS = [
         "count_start's warm-up policies are never judged with judge_every",
     ),
     Mutant(
-        DDPG,
+        TRAINER_CHECKPOINT,
         'ddpg = {**ddpg, "judge_every": 0}',
         "ddpg = ddpg",
         "checkpoints written before judge_every cannot be read",
@@ -525,7 +539,7 @@ MUTANTS = [
         "start's score kept as the bar to beat",
     ),
     Mutant(
-        DDPG,
+        SLOTS,
         "        return candidate[0] > incumbent[0]",
         "        return candidate[0] >= incumbent[0]",
         "ties replace the best",

@@ -9,14 +9,10 @@ import torch
 
 from lonlib.config import DDPGConfig, PendulumConfig
 from lonlib.ddpg.replay import ReplayBuffer
+from lonlib.ddpg.search import local_search, local_search_batch
+from lonlib.ddpg.slots import is_improvement
 from lonlib.ddpg.streams import EXPLORATION_NOISE, CounterStreams
-from lonlib.ddpg.trainer import (
-    SlotTrainer,
-    exploration_actions,
-    is_improvement,
-    local_search,
-    local_search_batch,
-)
+from lonlib.ddpg.trainer import SlotTrainer, exploration_actions
 from lonlib.task.pendulum import StepResult
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 from lonlib.task.rollout import evaluate, score_actors

@@ -5,9 +5,10 @@ import pytest
 import torch
 
 from lonlib.config import DDPGConfig, PendulumConfig
-from lonlib.ddpg.lean import LeanDDPG, learner_class
+from lonlib.ddpg.lean import LeanDDPG
+from lonlib.ddpg.learner import learner_class
 from lonlib.ddpg.reference import AutogradDDPG
-from lonlib.ddpg.trainer import local_search_batch
+from lonlib.ddpg.search import local_search_batch
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 
 HP = {"learning_rate": 1e-3, "gamma": 0.99, "tau": 0.005}

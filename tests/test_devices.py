@@ -20,6 +20,7 @@ import lonlib
 import lonlib.ddpg.devices as devices
 import lonlib.ddpg.trainer as trainer_module
 from lonlib.config import DDPGConfig, PendulumConfig
+from lonlib.ddpg.checkpoint import from_checkpoint, to_checkpoint
 from lonlib.ddpg.devices import (
     Transfer,
     TransferLog,
@@ -498,10 +499,10 @@ def test_a_shrink_copies_only_the_kept_slots(device_mode, monkeypatch):
 # What a checkpoint does on the host by design: its tensors are CPU tensors, made from
 # host arrays (the counted copies' results among them) and checked on the host when read.
 ON_THE_HOST = {
-    ("from_numpy", "ddpg/trainer.py:_tensor"),
-    ("from_numpy", "ddpg/trainer.py:_rows"),
-    ("tensor", "ddpg/trainer.py:_searches_to_checkpoint"),
-    ("host_tensor from_numpy", "ddpg/trainer.py:to_checkpoint"),
+    ("from_numpy", "ddpg/checkpoint.py:_tensor"),
+    ("from_numpy", "ddpg/checkpoint.py:_rows"),
+    ("tensor", "ddpg/checkpoint.py:_searches_to_checkpoint"),
+    ("host_tensor from_numpy", "ddpg/checkpoint.py:to_checkpoint"),
     ("host_tensor from_numpy", "ddpg/replay.py:state_tensors"),
     ("__bool__", "ddpg/plain_state.py:take"),
     ("numpy", "ddpg/plain_state.py:take_numpy"),
@@ -520,7 +521,7 @@ def test_a_checkpoint_copies_each_device_tensor_once_and_a_restore_sends_them_ba
     batch = trainer()
     for _ in range(HP.warmup_steps + 5):
         batch.step()
-    (plain, tensors), transfers, crossings = logged(monkeypatch, batch.to_checkpoint)
+    (plain, tensors), transfers, crossings = logged(monkeypatch, lambda: to_checkpoint(batch))
     params = [(3, A_SIZE)] * 4 + [(3, C_SIZE)] * 4  # online, target, two Adam moments
     sizes = batch.replay.size.tolist()
     width = 2 * OBS + ENV.n_carts + 2
@@ -533,9 +534,7 @@ def test_a_checkpoint_copies_each_device_tensor_once_and_a_restore_sends_them_ba
         Transfer("to host", (sum(sizes), width), torch.float32),  # the rows in use, once
     ]
     assert checkpoint_crossings(crossings) == []
-    restored, transfers, crossings = logged(
-        monkeypatch, lambda: SlotTrainer.from_checkpoint(plain, tensors)
-    )
+    restored, transfers, crossings = logged(monkeypatch, lambda: from_checkpoint(plain, tensors))
     keys = [] if device_mode == "cpu" else [Transfer("to device", (3,), torch.int64)]
     assert transfers == [
         Transfer("to device", (2, 3), torch.float64),  # the loss sums
@@ -709,7 +708,7 @@ def test_a_lockstep_batch_keeps_every_tensor_on_its_device_through_steps_and_eve
             )
             starts += 1
         if step == 60:
-            batch = SlotTrainer.from_checkpoint(*batch.to_checkpoint())
+            batch = from_checkpoint(*to_checkpoint(batch))
             events.add("restore")
         if step == 90:
             batch.drop([0])

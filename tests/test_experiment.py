@@ -373,7 +373,7 @@ def test_an_empty_trials_table_ends_no_run_early(reference, tmp_path):
 
 
 def test_a_session_lets_go_of_the_folder_however_its_end_fails(reference, tmp_path, monkeypatch):
-    import lonlib.experiment.running as running
+    import lonlib.storage.session as session
     from lonlib.storage.layout import SAMPLING_LOCK
     from lonlib.storage.lock import SamplingLock
 
@@ -383,7 +383,7 @@ def test_a_session_lets_go_of_the_folder_however_its_end_fails(reference, tmp_pa
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(running, "_record_session_end", interrupted)
+    monkeypatch.setattr(session, "_record_session_end", interrupted)
     lowered = dataclasses.replace(config, max_local_searches=2)
     with pytest.raises(KeyboardInterrupt):
         run_experiment(lowered, copy, progress=False, allow_changes=["max_local_searches"])

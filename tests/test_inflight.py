@@ -18,7 +18,9 @@ import pytest
 import torch
 
 import lonlib
-from lonlib.ddpg.trainer import JUDGE_BATCH, SlotTrainer
+from lonlib.ddpg.checkpoint import to_checkpoint
+from lonlib.ddpg.slots import JUDGE_BATCH
+from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.experiment.checkpoints import (
     StoredBatch,
     check_settings,
@@ -144,7 +146,7 @@ def test_a_restored_batch_continues_bit_for_bit(written):
         assert set(got) == set(want), name
 
 
-# The checkpoint layout of FORMAT 3. Changing what SlotTrainer.to_checkpoint writes means
+# The checkpoint layout of FORMAT 3. Changing what lonlib.ddpg.checkpoint.to_checkpoint writes means
 # checkpoints of running experiments stop being read: bump lonlib.experiment.checkpoints.FORMAT,
 # then
 # write the new layout here.
@@ -819,7 +821,7 @@ def test_every_checkpoint_a_batch_writes_is_read_back(tmp_path, monkeypatch):
 
     def read_back(_path, trainer, _trials):  # what save_inflight writes, read as it is read
         busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
-        plain, tensors = trainer.to_checkpoint()
+        plain, tensors = to_checkpoint(trainer)
         plain = json.loads(json.dumps(plain))
         runs, steps = [trainer.tags()[s] for s in busy], [int(trainer.steps[s]) for s in busy]
         stored = StoredBatch(Path("x.pt"), plain, tensors, 0.0, tuple(runs), tuple(steps))

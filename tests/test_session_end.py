@@ -78,8 +78,8 @@ def test_an_end_that_cannot_be_written_is_logged_not_raised(tiny, monkeypatch, c
     def full_disk(*args, **kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr("lonlib.experiment.running.mark_session_ended", full_disk)
-    with caplog.at_level(logging.WARNING, logger="lonlib.experiment.running"):
+    monkeypatch.setattr("lonlib.storage.session.mark_session_ended", full_disk)
+    with caplog.at_level(logging.WARNING, logger="lonlib.storage.session"):
         trials = run_experiment(config, out, progress=False)
     assert len(trials) > 0
     assert "could not record this session's end" in caplog.text
@@ -207,7 +207,7 @@ def test_a_lock_held_too_long_is_logged_and_the_session_returns(tiny, monkeypatc
     from lonlib.experiment import running
 
     real = running.execute_runs
-    monkeypatch.setattr(running, "SESSION_END_LOCK_SECONDS", 0.5)
+    monkeypatch.setattr("lonlib.storage.session.SESSION_END_LOCK_SECONDS", 0.5)
     release = threading.Event()
     holding = threading.Event()
 
@@ -222,7 +222,7 @@ def test_a_lock_held_too_long_is_logged_and_the_session_returns(tiny, monkeypatc
         holding.wait()
 
     monkeypatch.setattr(running, "execute_runs", then_the_lock_is_stuck)
-    with caplog.at_level(logging.WARNING, logger="lonlib.experiment.running"):
+    with caplog.at_level(logging.WARNING, logger="lonlib.storage.session"):
         run_experiment(dataclasses.replace(config, executor="serial"), out, progress=False)
     release.set()
     assert "could not record this session's end" in caplog.text

@@ -29,7 +29,9 @@ from lonlib.config import (
     named_config,
     with_overrides,
 )
-from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer, greedy_scores
+from lonlib.ddpg.checkpoint import checkpoint_configs, from_checkpoint, to_checkpoint
+from lonlib.ddpg.slots import LocalSearchResult
+from lonlib.ddpg.trainer import SlotTrainer, greedy_scores
 from lonlib.task.behaviour import describe_actors, describe_rollout, label
 from lonlib.task.pendulum import CoupledPendulums
 from lonlib.task.policy import actor_spec, critic_spec
@@ -414,12 +416,12 @@ def test_a_study_budget_is_not_checked_against_the_ddpg_sections_own_budget():
 
 def test_a_trainer_checkpoint_names_judge_every_only_when_set_and_reads_without_it():
     zero, every = trainer(None)[0], trainer(None, judge_every=100)[0]
-    plain_zero, _ = zero.to_checkpoint()
-    plain_every, tensors = every.to_checkpoint()
+    plain_zero, _ = to_checkpoint(zero)
+    plain_every, tensors = to_checkpoint(every)
     assert "judge_every" not in plain_zero["ddpg"]  # the layout of checkpoints before it
     assert plain_every["ddpg"]["judge_every"] == 100
-    assert SlotTrainer.checkpoint_configs(plain_zero)[1].judge_every == 0
-    restored = SlotTrainer.from_checkpoint(plain_every, tensors)
+    assert checkpoint_configs(plain_zero)[1].judge_every == 0
+    restored = from_checkpoint(plain_every, tensors)
     assert restored.hp.judge_every == 100
 
 

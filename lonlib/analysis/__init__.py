@@ -1,11 +1,12 @@
 """The paper's analysis of a stored experiment: peaks, statistics, claims, summary, figures,
 recordings and verification (no torch)."""
 
-from lonlib.analysis.claims import Claim, Landscape, claims_from_trials, landscapes, paper_claims
+from lonlib.analysis.claims import Claim, claims_from_trials, paper_claims
 from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import claims_markdown
 from lonlib.analysis.conditioning import conditioning_by_label
 from lonlib.analysis.holding import CHATTER_TOLERANT, holding_markdown, holding_summary
+from lonlib.analysis.landscape import Landscape, StoredExperiment, landscapes
 from lonlib.analysis.peaks import detect_peaks
 from lonlib.analysis.pipeline import (
     Analysis,
@@ -24,6 +25,7 @@ __all__ = [
     "CHATTER_TOLERANT",
     "Claim",
     "Landscape",
+    "StoredExperiment",
     "VerifyReport",
     "analyse",
     "claims_from_trials",

@@ -61,7 +61,6 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-import networkx as nx
 import numpy as np
 import pandas as pd
 from scipy import stats
@@ -69,10 +68,11 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.signal import find_peaks
 
 from lonlib.analysis.effect_size import compare_greater
+from lonlib.analysis.landscape import Landscape, landscapes
 from lonlib.analysis.peaks import compare_with_paper, detect_peaks
 from lonlib.lon.behaviour import behavioural_lon
 from lonlib.lon.behaviour_space import behaviour_node_curve, behaviour_nodes
-from lonlib.lon.graphs import build_lon, mlon, sinks
+from lonlib.lon.graphs import mlon
 from lonlib.lon.metrics import node_metrics
 from lonlib.storage.trials import read_finished_trials
 from lonlib.util.labels import p_label
@@ -216,42 +216,6 @@ class Claim:
     def __post_init__(self) -> None:
         if self.verdict not in VERDICTS:
             raise ValueError(f"verdict must be one of {VERDICTS}, got {self.verdict!r}")
-
-
-@dataclass(frozen=True)
-class Landscape:
-    """What the claims need of one p: its trials, its LON (:func:`~lonlib.lon.graphs.build_lon`,
-    maximised), the fitness of its sinks and of all its optima, and each run's best
-    (final) fitness."""
-
-    p: float
-    graph: nx.DiGraph
-    sink_fitness: np.ndarray
-    optima_fitness: np.ndarray
-    run_best: np.ndarray
-    trials: pd.DataFrame
-
-    @property
-    def labelled(self) -> bool:
-        """True when some optimum carries a behaviour label (lonlib.task.behaviour)."""
-        return any(label for _, label in self.graph.nodes(data="label", default=""))
-
-
-def landscapes(trials: pd.DataFrame, fitness_tolerance: float = 1e-9) -> dict[float, Landscape]:
-    """One :class:`Landscape` per stored p, in increasing p."""
-    out = {}
-    for p, group in trials.groupby("p", sort=True):
-        graph = build_lon(group, "max", fitness_tolerance)
-        fitness = dict(graph.nodes(data="fitness"))
-        out[float(p)] = Landscape(
-            p=float(p),
-            graph=graph,
-            sink_fitness=np.array([fitness[n] for n in sinks(graph)], float),
-            optima_fitness=np.array(list(fitness.values()), float),
-            run_best=np.array([fitness[n] for n in graph.graph["run_ends"].values()], float),
-            trials=group,
-        )
-    return out
 
 
 def examined_p(values: list[float]) -> float | None:
@@ -677,7 +641,17 @@ def claims_from_trials(
     seed: int = BOOTSTRAP_SEED,
 ) -> pd.DataFrame:
     """The claims table of stored trials (see the module docstring), rows a to e."""
-    by_p = landscapes(trials, fitness_tolerance)
+    return claims_of_landscapes(landscapes(trials, fitness_tolerance), bins, resamples, seed)
+
+
+def claims_of_landscapes(
+    by_p: dict[float, Landscape],
+    bins: int = 50,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> pd.DataFrame:
+    """:func:`claims_from_trials` of an experiment's landscapes (one per p, in increasing p:
+    :func:`~lonlib.analysis.landscape.landscapes`, or a loaded experiment's)."""
     land = by_p[examined_p(list(by_p))]
     rows = [
         claim_multimodal(land, bins, resamples, seed),
@@ -695,7 +669,11 @@ def peaks_beside_paper(
     """At the examined p, each of the paper's peaks beside the nearest peak detected in the
     sink histogram (Fig. 4) and in the optima histogram (Fig. 5), with their distance and
     the histogram's number of values (``values``: with few, every peak is one optimum)."""
-    by_p = landscapes(trials, fitness_tolerance)
+    return peaks_of_landscapes(landscapes(trials, fitness_tolerance), bins)
+
+
+def peaks_of_landscapes(by_p: dict[float, Landscape], bins: int = 50) -> pd.DataFrame:
+    """:func:`peaks_beside_paper` of an experiment's landscapes (one per p)."""
     land = by_p[examined_p(list(by_p))]
     tables = [
         compare_with_paper(detect_peaks(values, bins=bins)).assign(

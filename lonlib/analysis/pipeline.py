@@ -8,6 +8,7 @@ the figures and tables derived here).
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,8 +21,8 @@ from lonlib.analysis.claims import (
     BEHAVIOUR_NODE_EPSILON,
     SPARSE_MAX_SHARE,
     claim_d_curve,
-    claims_from_trials,
-    peaks_beside_paper,
+    claims_of_landscapes,
+    peaks_of_landscapes,
 )
 from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import write_claims
@@ -36,6 +37,7 @@ from lonlib.analysis.conditioning import (
 )
 from lonlib.analysis.holding import COLUMNS as HOLDING_COLUMNS
 from lonlib.analysis.holding import holding_table, needed_columns
+from lonlib.analysis.landscape import StoredExperiment
 from lonlib.analysis.peaks import compare_with_paper, detect_peaks
 from lonlib.analysis.plots import (
     claim_d_curve_plot,
@@ -96,7 +98,7 @@ class Analysis:
 
 
 def analyse(
-    folder: str | Path,
+    experiment: str | Path | StoredExperiment,
     seed: int = 0,
     fitness_tolerance: float = 1e-9,
     bins: int = 50,
@@ -117,9 +119,15 @@ def analyse(
     (replaying every stored Actor: about a minute for 40 optima on one core), the claims
     on the LONs re-scored with the robust mean beside the nominal ones
     (``claims_robust.csv``, ``claims_nominal_robust.csv`` and ``.md``) and the optima that
-    hold their rods (``holding.csv``: :mod:`lonlib.analysis.holding`)."""
-    folder = Path(folder)
-    _, trials = load_experiment(folder)
+    hold their rods (``holding.csv``: :mod:`lonlib.analysis.holding`).
+
+    ``experiment``: a folder, or a :class:`~lonlib.analysis.landscape.StoredExperiment`
+    loaded from one (at ``fitness_tolerance``, which it then carries): each p's LON is built
+    once, for the figures, the claims and the conditioning."""
+    if not isinstance(experiment, StoredExperiment):
+        experiment = StoredExperiment.load(experiment, fitness_tolerance)
+    folder, trials = experiment.folder, experiment.trials
+    fitness_tolerance = experiment.fitness_tolerance
     out = folder / "figures"
     out.mkdir(parents=True, exist_ok=True)
     result = Analysis(metrics=pd.DataFrame(), peaks=pd.DataFrame())
@@ -134,8 +142,8 @@ def analyse(
     save("fig2_optima_boxplot", optima_boxplot(trials))
     labelled = "label" in trials
     metric_rows, peak_rows, behavioural_rows = [], [], []
-    for p, group in trials.groupby("p", sort=True):
-        graph = build_lon(group, "max", fitness_tolerance)
+    for p, land in experiment.landscapes.items():
+        graph, group = land.graph, land.trials
         label = p_label(p)
         metric_rows.append({"p": p, **lon_metrics(graph)})
         name, title = f"fig3_lon_p={label}", f"3-D LON, p = {label}"
@@ -179,8 +187,8 @@ def analyse(
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
-    result.claims = claims_from_trials(trials, bins, fitness_tolerance)
-    result.claim_peaks = peaks_beside_paper(trials, bins, fitness_tolerance)
+    result.claims = claims_of_landscapes(experiment.landscapes, bins)
+    result.claim_peaks = peaks_of_landscapes(experiment.landscapes, bins)
     result.claim_d_curve = claim_d_curve(trials)
     result.power = power_table()
     result.files += write_claims(
@@ -194,16 +202,23 @@ def analyse(
     if trials["p"].nunique() > 2:
         save("sensitivity", sensitivity(result.metrics))
     if conditioning:
-        _conditioning(folder, trials, result, save, out, bins, fitness_tolerance)
+        _conditioning(experiment, result, save, out, bins)
     return result
 
 
-def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) -> None:
+def _conditioning(
+    experiment: StoredExperiment,
+    result: Analysis,
+    save: Callable[[str, plt.Figure], None],
+    out: Path,
+    bins: int,
+) -> None:
     """The nodes' conditioning (:mod:`lonlib.analysis.conditioning`): every stored Actor replayed
     (``replayed.csv``), nominal beside robust Figs. 4-5, the retention curve and the table
     per behaviour label; edges a re-scoring would make deteriorating; the optima that hold
     their rods."""
-    config, _ = load_experiment(folder)
+    folder, config, trials = experiment.folder, experiment.config, experiment.trials
+    fitness_tolerance = experiment.fitness_tolerance
     replayed = replay_optima(folder, trials, config.env, config.ddpg.scoring)
     result.replayed = replayed
     # without stored Actors this warns and leaves no stale robust claims
@@ -225,7 +240,7 @@ def _conditioning(folder, trials, result, save, out, bins, fitness_tolerance) ->
     curves = []
     for p, group in nodes.groupby("p", sort=True):
         label = p_label(p)
-        graph = build_lon(trials[trials["p"] == p], "max", fitness_tolerance)
+        graph = experiment.landscapes[float(p)].graph
         sink_keys = {(graph.nodes[n]["run"], graph.nodes[n]["index"]) for n in sinks(graph)}
         is_sink = [(r, i) in sink_keys for r, i in zip(group["run"], group["index"], strict=True)]
         sink_rows = group[is_sink]

@@ -54,7 +54,8 @@ from lonlib.calibration.imitation import DEFAULT_TEACHER
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.calibration.study import JudgedLog
 from lonlib.config import DDPGConfig, PendulumConfig, named_config
-from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer
+from lonlib.ddpg.slots import LocalSearchResult
+from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.search.algorithm import perturb_parameters
 from lonlib.storage.atomic import atomic_write, read_json, write_json
 from lonlib.task.behaviour import LABELS

@@ -32,6 +32,7 @@ from typing import Any
 
 import torch
 
+from lonlib.ddpg.checkpoint import from_checkpoint, to_checkpoint
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.storage.atomic import atomic_write
 from lonlib.storage.inflight import new_id, refusal_reason
@@ -58,7 +59,7 @@ class CellCheckpoint:
         it supersedes."""
         write_id = new_id()
         data_path = self.folder / f"{self.name}.{write_id}.pt"
-        plain, tensors = trainer.to_checkpoint()
+        plain, tensors = to_checkpoint(trainer)
         buffer = io.BytesIO()
         torch.save({"format": FORMAT, "write_id": write_id, "tensors": tensors}, buffer)
         atomic_write(data_path, buffer.getvalue())
@@ -109,7 +110,7 @@ class CellCheckpoint:
                 or payload["write_id"] != meta["write_id"]
             ):
                 raise ValueError("the data file is not the one its metadata describes")
-            trainer = SlotTrainer.from_checkpoint(meta["trainer"], payload["tensors"])
+            trainer = from_checkpoint(meta["trainer"], payload["tensors"])
             if not isinstance(meta["state"], dict):
                 raise ValueError("state must be a mapping")
         except Exception as error:

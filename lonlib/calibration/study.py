@@ -58,7 +58,8 @@ import pandas as pd
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.config import CalibrationConfig, Cell, PendulumConfig, Scoring
 from lonlib.config.calibration import INTEGRATORS
-from lonlib.ddpg.trainer import LocalSearchResult, SlotTrainer
+from lonlib.ddpg.slots import LocalSearchResult
+from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.storage.atomic import atomic_write, read_json, write_json
 from lonlib.task.behaviour import LABELS, describe_actors, describe_rollout, label
 from lonlib.task.pendulum import total_energy, wrap_angle

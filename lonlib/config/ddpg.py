@@ -183,6 +183,21 @@ def check_judging(hp: DDPGConfig) -> None:
         )
 
 
+# Minibatch sizes that keep a batched agent's update bit-identical to its update alone
+# (measured: sizes that are not a multiple of 4 take other vector-loop paths by batch).
+BATCH_MULTIPLE = 8
+
+
+def check_batch_size(hp: DDPGConfig, agents: int) -> None:
+    """Refuse, naming ``batch_size``, a minibatch size that would make a batched agent's
+    bits depend on its batch (only when more than one agent trains)."""
+    if agents > 1 and hp.batch_size % BATCH_MULTIPLE:
+        raise ValueError(
+            f"batch_size must be a multiple of {BATCH_MULTIPLE} to train agents together "
+            f"(other sizes make an agent's bits depend on its batch), got {hp.batch_size}"
+        )
+
+
 def without_default_judging(ddpg: dict[str, Any]) -> dict[str, Any]:
     """DDPG settings (plain data) without ``judge_every`` where it is 0: results stored before
     the field existed judged every episode, which is what 0 means, so they stay comparable."""

@@ -33,14 +33,11 @@ branch by device; parameters cross between host and device only through
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
 
 import numpy as np
 import torch
 
-from lonlib.config import LEARNERS
 from lonlib.ddpg.devices import to_device, to_host
-from lonlib.ddpg.reference import AutogradDDPG
 from lonlib.ddpg.streams import SIMD_PAD
 from lonlib.task.policy import NetSpec
 
@@ -48,35 +45,6 @@ BETAS = (0.9, 0.999)  # torch.optim.Adam's defaults, as the autograd reference u
 EPS = 1e-8
 # Beyond this many steps both float32 bias-correction coefficients are exactly 1 and -lr.
 ADAM_TABLE_STEPS = 20_000
-
-
-class Learner(Protocol):
-    """What the local search needs from a DDPG learner of ``k`` agents."""
-
-    def update(self, batch: tuple[torch.Tensor, ...]) -> tuple[np.ndarray, np.ndarray]:
-        """One update on ``(s, a, r, s', not_done)``; per-agent critic and actor losses."""
-        ...
-
-    def act(self, obs: torch.Tensor) -> torch.Tensor:
-        """Greedy actions ``[k, n]`` for one observation per agent ``[k, o]``."""
-        ...
-
-    def actor_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
-        """Online Actor parameters ``[k, P_actor]`` in Eq. 1 order (only the agents at
-        ``rows``, an int64 index tensor on the learner's device, if given)."""
-        ...
-
-    def critic_flat(self, rows: torch.Tensor | None = None) -> np.ndarray:
-        """Online Critic parameters ``[k, P_critic]`` in Eq. 1 order (only ``rows``'s)."""
-        ...
-
-
-def learner_class(kind: str) -> type[Learner]:
-    """The ``"lean"`` (:class:`LeanDDPG`) or ``"autograd"`` learner class; both take
-    ``(actor_spec, critic_spec, thetas, omegas, *, learning_rate, gamma, tau, device)``."""
-    if kind not in LEARNERS:
-        raise ValueError(f"update must be one of {LEARNERS}, got {kind!r}")
-    return LeanDDPG if kind == "lean" else AutogradDDPG
 
 
 @dataclass(frozen=True)
@@ -120,6 +88,8 @@ class LeanDDPG:
     parameters and ``reset_agent(i, theta, omega)`` restarts one agent's slot (parameters,
     targets, Adam moments and step count) for reuse.
     """
+
+    per_agent_state = True  # each agent's state is reset, selected and loaded on its own
 
     def __init__(
         self,

@@ -65,8 +65,11 @@ class AutogradDDPG:
     """``k`` agents' Actor, Critic, targets and Adam states, updated by :func:`autograd_update`.
 
     Same interface as :class:`lonlib.ddpg.lean.LeanDDPG` (without slot resets: the torch
-    optimizers keep one step count for all agents).
+    optimizers keep one step count for all agents): :meth:`reset_agent`, :meth:`select`,
+    :meth:`load_state` and :attr:`steps` raise ValueError.
     """
+
+    per_agent_state = False  # one optimizer holds every agent's state
 
     def __init__(
         self,
@@ -152,3 +155,23 @@ class AutogradDDPG:
                 ]
                 out[f"{name}_{moment}"] = torch.cat(parts, dim=1).cpu().numpy()
         return out
+
+    def _whole(self, what: str) -> ValueError:
+        return ValueError(f"the 'autograd' learner {what}: its optimizers hold every agent's state")
+
+    @property
+    def steps(self) -> np.ndarray:
+        """Per-agent Adam step counts: none (one optimizer step count for all agents)."""
+        raise self._whole("has no per-agent step counts")
+
+    def load_state(self, state: dict[str, np.ndarray], steps: np.ndarray) -> None:
+        """Not possible: the optimizers' state is not per agent."""
+        raise self._whole("cannot load one agent's state")
+
+    def reset_agent(self, agent: int, theta: np.ndarray, omega: np.ndarray) -> None:
+        """Not possible: the optimizers' step count is shared by every agent."""
+        raise self._whole("cannot reset one agent")
+
+    def select(self, index: list[int]) -> AutogradDDPG:
+        """Not possible: the optimizers' step count is shared by every agent."""
+        raise self._whole("cannot keep only some agents")

@@ -1,6 +1,6 @@
 """DDPG as Algorithm 2's local search ``F`` (:mod:`lonlib.search`): the paper's plug-in.
 
-:func:`ddpg_local_search` binds the DDPG local search (:func:`lonlib.ddpg.trainer.local_search`)
+:func:`ddpg_local_search` binds the DDPG local search (:func:`lonlib.ddpg.search.local_search`)
 to an environment and hyperparameters as a :data:`lonlib.search.algorithm.LocalSearch`;
 :func:`local_optimum` turns one DDPG result into Algorithm 2's :class:`LocalOptimum`.
 """
@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 
-from lonlib.ddpg.trainer import local_search
+from lonlib.ddpg.search import local_search
 from lonlib.search.algorithm import LocalOptimum, LocalSearch
 from lonlib.task.behaviour import describe_columns
 
@@ -29,7 +29,7 @@ def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSear
 
 
 def local_optimum(result, env_config, hp, describe_optima: bool = True) -> LocalOptimum:
-    """A DDPG :class:`lonlib.ddpg.trainer.LocalSearchResult` as Algorithm 2's :class:`LocalOptimum`
+    """A DDPG :class:`lonlib.ddpg.slots.LocalSearchResult` as Algorithm 2's :class:`LocalOptimum`
     (with its behaviour descriptor when ``describe_optima``)."""
     behaviour = describe_columns(result.theta, env_config, hp.scoring) if describe_optima else None
     return LocalOptimum(

@@ -16,12 +16,12 @@ random stream seeds, environments, queued greedy evaluations) every few minutes:
                                                   (settings, searches, queue, stream seeds,
                                                   the simulator's generator state)
 
-Data, not code: the batch is exported by :meth:`lonlib.ddpg.trainer.SlotTrainer.to_checkpoint` as
+Data, not code: the batch is exported by :func:`lonlib.ddpg.checkpoint.to_checkpoint` as
 named tensors and JSON that name no Python class, and read back with ``torch.load(...,
 weights_only=True)`` (which builds tensors and plain containers only) and :mod:`json`, every
 tensor's shape and dtype and every value's kind and range checked against a batch of the
 stored settings and the experiment's runs before anything is used or locked
-(:meth:`~lonlib.ddpg.trainer.SlotTrainer.from_checkpoint`). So a planted or damaged file is refused
+(:func:`~lonlib.ddpg.checkpoint.from_checkpoint`). So a planted or damaged file is refused
 with a reason (and removed) without running anything, never a traceback; files not named by
 lonlib's ids (:data:`ID`) are ignored. A checkpoint does not depend on module paths or
 class layouts. Every checkpoint carries :data:`FORMAT`;
@@ -55,6 +55,7 @@ from typing import Any
 import torch
 
 from lonlib.config import DDPGConfig, PendulumConfig
+from lonlib.ddpg.checkpoint import checkpoint_configs, from_checkpoint, to_checkpoint
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.storage.atomic import atomic_write
 from lonlib.storage.inflight import (
@@ -81,7 +82,7 @@ def save_inflight(metadata_path: Path, trainer: SlotTrainer, trials: dict[Job, i
     data_path = metadata_path.with_name(f"{metadata_path.stem}.{write_id}.pt")
     busy = [slot for slot in range(trainer.slots) if trainer.busy[slot]]
     runs = [trainer.tags()[slot] for slot in busy]
-    plain, tensors = trainer.to_checkpoint()
+    plain, tensors = to_checkpoint(trainer)
     buffer = io.BytesIO()
     torch.save({"format": FORMAT, "write_id": write_id, "tensors": tensors}, buffer)
     atomic_write(data_path, buffer.getvalue())
@@ -110,7 +111,7 @@ class StoredBatch:
     """A checkpoint's batch as read: plain data and tensors, nothing built from them yet."""
 
     source: Path  # the data file
-    plain: dict[str, Any]  # SlotTrainer.to_checkpoint's plain data
+    plain: dict[str, Any]  # lonlib.ddpg.checkpoint.to_checkpoint's plain data
     tensors: dict[str, Any]  # and its tensors
     clock: float  # time.perf_counter() at the write
     runs: tuple[Job, ...]  # the runs its metadata lists, the tags of its busy slots
@@ -120,7 +121,7 @@ class StoredBatch:
         """The environment and DDPG settings the batch was trained with (``ValueError``
         if they are missing or invalid)."""
         try:
-            return SlotTrainer.checkpoint_configs(self.plain)
+            return checkpoint_configs(self.plain)
         except Exception as error:  # whatever the file holds is refused, never raised
             raise ValueError(f"{self.source}: refused, {refusal_reason(error)}") from None
 
@@ -129,7 +130,7 @@ class StoredBatch:
         so that time spent dead does not count as search time. ``ValueError`` (naming the
         first misfit) if anything in it does not fit a batch of its settings."""
         try:
-            trainer = SlotTrainer.from_checkpoint(self.plain, self.tensors, device)
+            trainer = from_checkpoint(self.plain, self.tensors, device)
             self._check_runs(trainer)
         except Exception as error:  # whatever the file holds is refused, never raised
             raise ValueError(f"{self.source}: refused, {refusal_reason(error)}") from None

@@ -36,8 +36,9 @@ from typing import Any
 import numpy as np
 
 from lonlib.config import DDPGConfig
+from lonlib.config.ddpg import check_batch_size
 from lonlib.ddpg.search_interface import local_optimum
-from lonlib.ddpg.trainer import SlotTrainer, check_batch_size
+from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.experiment.checkpoints import (
     check_settings,
     read_inflight,

@@ -37,26 +37,19 @@ from lonlib.experiment.runs import experiment_plan, hold_runs, open_run, run_loc
 from lonlib.storage.atomic import (
     DataWriteError,
     check_output_folder,
-    remove_temporary_files,
-    write_json,
 )
 from lonlib.storage.inflight import checkpoint_lock_path, scan_inflight
-from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, run_dir
-from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
+from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.manifest import (
     capability_change,
     manifest_path,
-    mark_session_ended,
-    sessions_with_other_result_path,
-    updated_manifest,
 )
 from lonlib.storage.provenance import session_provenance
-from lonlib.storage.result_path import RESULT_PATH_VERSION
+from lonlib.storage.session import SamplingSession
 from lonlib.storage.status import experiment_status
 from lonlib.storage.trials import (
     load_run_state,
     read_experiment_trials,
-    runs_ending_early,
     save_step,
 )
 from lonlib.util.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
@@ -130,65 +123,11 @@ def remove_finished_checkpoints(
                 remove_inflight(checkpoint.metadata_path)
 
 
-def refuse_mixed_result_paths(out: Path) -> None:
-    """Refuse to sample more into an experiment whose stored sessions ran another
-    result-path version (:mod:`lonlib.storage.result_path`): no experiment mixes two versions of a
-    result-changing path. Analysing it (``lonlib analyse``, ``lonlib verify``) still works."""
-    others = sessions_with_other_result_path(out)
-    if others:
-        found = sorted({str(s["result_path_version"]) for s in others})
-        raise ValueError(
-            f"{out} was sampled by result-path version(s) {found} ('None': before versions "
-            f"were recorded) and this lonlib computes version {RESULT_PATH_VERSION}: its "
-            "runs cannot be continued or extended without mixing two versions of the results. "
-            "Analyse it as it is (lonlib analyse / lonlib verify), or sample the experiment "
-            "again into a new folder (--out)"
-        )
-
-
 def _held_by_another(out: Path, run: tuple[float, int]) -> bool:
     """Does another process hold run ``run``'s lock? (One lock at a time: a folder of
     thousands of runs must not open them all at once.)"""
     with hold_runs(out, [run]) as free:
         return not free
-
-
-def _hold_sampling_lock(
-    out: Path, manifest: dict[str, Any], sampling: SamplingLock, changed: bool
-) -> None:
-    """Hold ``out``'s sampling lock for this session: shared, or exclusively when the session
-    changes the stored settings (``allow_changes``), refused with a ValueError while another
-    session samples (under the old settings). Runs another process holds refuse a change
-    too: a session of an older lonlib holds run locks but no sampling lock."""
-    try:
-        sampling.acquire(exclusive=changed)
-    except LockHeld:
-        held = True
-    else:
-        held = False
-        if changed:
-            config = manifest["config"]
-            started = [
-                (p, run)
-                for p in config["perturbations"]
-                for run in range(config["runs"])
-                if run_dir(out, p, run).exists()
-            ]
-            held = any(_held_by_another(out, run) for run in started)
-            if not held:  # a search stored past the new cap before we held the lock
-                early = runs_ending_early(out, ExperimentConfig.from_mapping(config).basin_hopping)
-                if early:
-                    sampling.release()
-                    raise ValueError(
-                        f"{out}: cannot change {sorted(manifest['sessions'][-1]['changed'])}: "
-                        f"stored run(s) go on past the new settings: {'; '.join(early[:5])}"
-                    )
-    if held:
-        sampling.release()
-        raise ValueError(
-            f"{out}: another process is sampling this experiment; stop it before changing "
-            f"{sorted(manifest['sessions'][-1]['changed'])}"
-        )
 
 
 def run_experiment(
@@ -238,6 +177,49 @@ def run_experiment(
     process continues the run from what the holder stored.
     """
     started = time.monotonic()  # the drain time counts from here
+    config, kind = _session_config(
+        config, workers, scheduler, max_attempts, executor, slots, checkpoint_seconds
+    )
+    check_drain(kind, drain_after_seconds)
+    drain_at = None if drain_after_seconds is None else started + drain_after_seconds
+    out = Path(out)
+    check_output_folder(out)
+    capability = torch_cpu_capability()
+    session = SamplingSession.open(
+        out,
+        config,
+        session_provenance(capability),
+        allow_changes,
+        pending=lambda: pending_runs(config, out),
+        tidy=lambda todo: remove_finished_checkpoints(out, todo, config),
+        held_by_another=partial(_held_by_another, out),
+        started=started,
+    )
+    try:  # from here on the session records its end, however it stops
+        if session.todo and config.ddpg.device == "cpu":
+            warn_about_cpu_kernels(session.manifest, capability)
+        with _progress(config, session.todo, progress) as bar:
+            sampler = _Sampler(out, config, kind, bar, workers, scheduler, max_attempts)
+            sampler.run(session.todo, checkpoint_seconds, drain_at)
+    except DataWriteError:
+        session.failed_write()  # a session stopped by a failed write writes nothing more
+        raise
+    finally:
+        session.close()
+    return read_experiment_trials(out)
+
+
+def _session_config(
+    config: ExperimentConfig,
+    workers: int,
+    scheduler: str | None,
+    max_attempts: int,
+    executor: str | None,
+    slots: int | None,
+    checkpoint_seconds: float | None,
+) -> tuple[ExperimentConfig, str]:
+    """The configuration this session uses (its executor kind and slots) and the kind, every
+    argument of :func:`run_experiment` checked (ValueError naming it)."""
     check_range("workers", workers, 1, 4096)
     check_range("max_attempts", max_attempts, 1, 1000)
     requested = session_executor(executor, config.executor, scheduler)
@@ -250,130 +232,101 @@ def run_experiment(
     check_device(config.ddpg.device)
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
-    check_drain(kind, drain_after_seconds)
-    drain_at = None if drain_after_seconds is None else started + drain_after_seconds
-    out = Path(out)
-    check_output_folder(out)
-    capability = torch_cpu_capability()
-    sampling = SamplingLock(out / SAMPLING_LOCK)
-    try:
-        with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
-            remove_temporary_files(out, manifest_path(out).name)
-            manifest = updated_manifest(config, out, session_provenance(capability), allow_changes)
-            changed = bool(manifest["sessions"][-1].get("changed"))
-            _hold_sampling_lock(out, manifest, sampling, changed)
-            todo = pending_runs(config, out)  # reads every stored run: a corrupt file stops us
-            if todo and manifest_path(out).exists():
-                refuse_mixed_result_paths(out)
-            remove_finished_checkpoints(out, todo, config)
-            recorded = bool(todo) or changed or not manifest_path(out).exists()
-            if recorded:  # a finished experiment stays untouched, unless its settings change
-                write_json(manifest_path(out), manifest)
-            sampling.share()
-    except BaseException:
-        sampling.release()
-        raise
-    bar = None
-    try:  # from here on the session records its end, however it stops
-        if todo and config.ddpg.device == "cpu":
-            warn_about_cpu_kernels(manifest, capability)
-        total = len(config.perturbations) * config.runs
-        bar = progress_bar(
-            total=total,
-            initial=total - len(todo),
-            desc=f"{config.name} runs",
-            disable=not progress,
-            unit="run",
-        )
-        held: dict[tuple[float, int], str] = {}
+    return config, kind
 
-        def on_done(summary: dict[str, Any]) -> None:
-            if summary["held_by"] is None:
-                _refresh(bar, out, done=1)
-            else:
-                held[summary["p"], summary["run"]] = summary["held_by"]
 
-        def execute(jobs: list[tuple[float, int]], wait: bool) -> None:
-            if kind == "lockstep":
-                run_lockstep_processes(
-                    out,
-                    config,
-                    jobs,
-                    on_done,
-                    slots,
-                    workers,
-                    wait,
-                    lambda info: _refresh(bar, out, batch=info),
-                    checkpoint_seconds=checkpoint_seconds,
-                    drain_at=drain_at,
-                )
-                return
-            execute_runs(
-                partial(run_one, out, config, wait=wait),
-                jobs,
-                on_done,
-                workers=1 if kind == "serial" else workers,
-                scheduler=scheduler if kind == "dask" else None,
-                max_attempts=max_attempts,
-                key_prefix=config.name,
-                on_tick=lambda: _refresh(bar, out),
-                worker_check=partial(check_worker_sees_folder, str(out)),
-            )
+def _progress(config: ExperimentConfig, todo: list[tuple[float, int]], progress: bool) -> tqdm:
+    """The session's progress bar over the experiment's runs (those done count as done)."""
+    total = len(config.perturbations) * config.runs
+    return progress_bar(
+        total=total,
+        initial=total - len(todo),
+        desc=f"{config.name} runs",
+        disable=not progress,
+        unit="run",
+    )
 
+
+class _Sampler:
+    """The runs of a session executed on its executor ``kind``: :meth:`run` does the runs to
+    do, then the runs another process was writing (waiting for them), then removes the
+    in-flight checkpoints of the runs that ended."""
+
+    def __init__(
+        self,
+        out: Path,
+        config: ExperimentConfig,
+        kind: str,
+        bar: tqdm,
+        workers: int,
+        scheduler: str | None,
+        max_attempts: int,
+    ) -> None:
+        self.out, self.config, self.kind, self.bar = out, config, kind, bar
+        self.workers, self.scheduler, self.max_attempts = workers, scheduler, max_attempts
+        self.held: dict[tuple[float, int], str] = {}
+
+    def on_done(self, summary: dict[str, Any]) -> None:
+        if summary["held_by"] is None:
+            _refresh(self.bar, self.out, done=1)
+        else:
+            self.held[summary["p"], summary["run"]] = summary["held_by"]
+
+    def run(
+        self,
+        todo: list[tuple[float, int]],
+        checkpoint_seconds: float | None,
+        drain_at: float | None,
+    ) -> None:
+        out, config = self.out, self.config
         if todo:
-            execute(todo, wait=False)
-        if held and draining(drain_at):  # waiting for them would start searches
+            self.execute(todo, False, checkpoint_seconds, drain_at)
+        if self.held and draining(drain_at):  # waiting for them would start searches
             log.warning(
-                "%s: drained; %d runs another process is writing left to it", out, len(held)
+                "%s: drained; %d runs another process is writing left to it", out, len(self.held)
             )
-        elif held:
-            names = "; ".join(f"p={p} run {run}: {who}" for (p, run), who in held.items())
+        elif self.held:
+            names = "; ".join(f"p={p} run {run}: {who}" for (p, run), who in self.held.items())
             log.warning("%s: waiting for runs another process is writing (%s)", out, names)
-            jobs = list(held)
-            held.clear()
-            execute(jobs, wait=True)
+            jobs = list(self.held)
+            self.held.clear()
+            self.execute(jobs, True, checkpoint_seconds, drain_at)
         if todo:  # a batch that ended without resuming a checkpoint of its runs left it
             remove_finished_checkpoints(out, pending_runs(config, out), config)
-    except DataWriteError:
-        recorded = False  # a session stopped by a failed write writes nothing more
-        raise
-    finally:
-        try:
-            if bar is not None:
-                bar.close()
-            if recorded:
-                seconds = time.monotonic() - started
-                _record_session_end(out, manifest["sessions"][-1]["id"], seconds)
-        finally:  # a session that ends, however, lets go of the folder
-            sampling.release()
-    return read_experiment_trials(out)
 
-
-SESSION_END_LOCK_SECONDS = 30.0
-"""How long a session waits for the manifest lock to record its end before it gives up
-(logged): another session starting on the folder holds it while it reads every stored run."""
-
-
-def _record_session_end(out: Path, session_id: str, seconds: float) -> None:
-    """The session's end in the manifest (its measured wall time). Best effort: a folder or
-    manifest that is gone is left gone, and any failure to write the end (the lock held past
-    :data:`SESSION_END_LOCK_SECONDS`, a disk error, a manifest edited into another shape) is
-    logged, never raised, so it cannot hide the error that may be ending the session."""
-    if not manifest_path(out).is_file():
-        return
-    deadline = time.monotonic() + SESSION_END_LOCK_SECONDS
-    try:
-        while True:
-            try:
-                with exclusive_lock(out / MANIFEST_LOCK, wait=False, record_holder=False):
-                    mark_session_ended(out, session_id, seconds)
-                return
-            except LockHeld:
-                if time.monotonic() >= deadline:
-                    raise
-                time.sleep(0.2)
-    except Exception as error:  # noqa: BLE001  (logged: see the docstring)
-        log.warning("%s: could not record this session's end in the manifest: %s", out, error)
+    def execute(
+        self,
+        jobs: list[tuple[float, int]],
+        wait: bool,
+        checkpoint_seconds: float | None,
+        drain_at: float | None,
+    ) -> None:
+        out, config, kind, bar = self.out, self.config, self.kind, self.bar
+        if kind == "lockstep":
+            run_lockstep_processes(
+                out,
+                config,
+                jobs,
+                self.on_done,
+                config.slots,
+                self.workers,
+                wait,
+                lambda info: _refresh(bar, out, batch=info),
+                checkpoint_seconds=checkpoint_seconds,
+                drain_at=drain_at,
+            )
+            return
+        execute_runs(
+            partial(run_one, out, config, wait=wait),
+            jobs,
+            self.on_done,
+            workers=1 if kind == "serial" else self.workers,
+            scheduler=self.scheduler if kind == "dask" else None,
+            max_attempts=self.max_attempts,
+            key_prefix=config.name,
+            on_tick=lambda: _refresh(bar, out),
+            worker_check=partial(check_worker_sees_folder, str(out)),
+        )
 
 
 def warn_about_cpu_kernels(manifest: dict[str, Any], capability: str) -> None:

@@ -13,6 +13,7 @@ from lonlib.storage.lock import LockHeld
 from lonlib.storage.manifest import manifest_path, session_seconds
 from lonlib.storage.policies import StoredPolicy, load_policy
 from lonlib.storage.result_path import RESULT_PATH_VERSION, experiment_digest
+from lonlib.storage.session import SamplingSession
 from lonlib.storage.status import experiment_status
 from lonlib.storage.thin import thin_histories
 from lonlib.storage.trials import (
@@ -28,6 +29,7 @@ __all__ = [
     "LockHeld",
     "MissingExperimentError",
     "RESULT_PATH_VERSION",
+    "SamplingSession",
     "StoredPolicy",
     "experiment_digest",
     "experiment_status",
