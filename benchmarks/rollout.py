@@ -59,6 +59,20 @@ def timed(command: list[str], env: dict[str, str]) -> float:
     return time.perf_counter() - start
 
 
+def printed_number(code: str, backend: str) -> float:
+    """The number that ``code`` prints last, run in a process of its own on ``backend``
+    (one torch thread)."""
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, compiled.ROLLOUT_VARIABLE: backend, "OMP_NUM_THREADS": "1"},
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return float(out.stdout.strip().splitlines()[-1])
+
+
 def search_ms_per_step(backend: str, steps: int = 6000) -> float:
     """Wall ms per env step of one DDPG local search at batch 256 (one agent, one thread,
     judging every episode), in a process of its own."""
@@ -76,15 +90,7 @@ def search_ms_per_step(backend: str, steps: int = 6000) -> float:
         "local_search(actor_spec(2).initial(rng), critic_spec(2).initial(rng), env, hp, seed=0)\n"
         "print(time.perf_counter() - t)\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        env={**os.environ, compiled.ROLLOUT_VARIABLE: backend, "OMP_NUM_THREADS": "1"},
-        cwd=ROOT,
-        check=True,
-        capture_output=True,
-        text=True,
-    )
-    return 1000 * float(out.stdout.strip().splitlines()[-1]) / steps
+    return 1000 * printed_number(code, backend) / steps
 
 
 def lockstep_rate(backend: str, k: int = 16, batch: int = 2000) -> float:
@@ -94,15 +100,7 @@ def lockstep_rate(backend: str, k: int = 16, batch: int = 2000) -> float:
         "from benchmarks.lockstep import agent_steps_per_second\n"
         f"print(agent_steps_per_second({k}, {batch}, 'cpu', 20.0))\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        env={**os.environ, compiled.ROLLOUT_VARIABLE: backend, "OMP_NUM_THREADS": "1"},
-        cwd=ROOT,
-        check=True,
-        capture_output=True,
-        text=True,
-    )
-    return float(out.stdout.strip().splitlines()[-1])
+    return printed_number(code, backend)
 
 
 def main() -> None:
