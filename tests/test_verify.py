@@ -97,11 +97,35 @@ def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
     manifest = folder / "manifest.json"
     data = json.loads(manifest.read_text())
     for session in data["sessions"]:
-        session["result_path_version"] = "0-older"
+        session["result_path_version"] = "1"  # a known, older version
     manifest.write_text(json.dumps(data))
     report = verify_experiment(folder)
     assert report.ok and not report.current_version
     assert {f.check for f in report.warnings} >= {"version", "fitness"}
+
+
+@pytest.mark.parametrize("version", ["99", "0-older", "3"])
+def test_an_unknown_result_path_version_never_turns_an_error_into_a_warning(
+    damaged, version, capsys
+):
+    folder, trials = damaged
+    first = trials.iloc[0]
+
+    def damage(table):
+        table["fitness"] += 0.5
+
+    rewrite(folder, float(first.p), int(first.run), damage)
+    manifest = folder / "manifest.json"
+    data = json.loads(manifest.read_text())
+    data["sessions"][-1]["result_path_version"] = version
+    manifest.write_text(json.dumps(data))
+    report = verify_experiment(folder)
+    assert not report.ok
+    assert {f.check for f in report.errors} >= {"version", "fitness"}
+    with pytest.raises(SystemExit):
+        cli_main(["verify", str(folder)])
+    out = capsys.readouterr().out
+    assert "does not know" in out and "verify: FAILED" in out
 
 
 def test_an_experiment_of_another_result_path_is_not_extended(damaged):

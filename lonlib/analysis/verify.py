@@ -42,7 +42,7 @@ import pandas as pd
 from lonlib.search.algorithm import RunState, Trial, random_parameters, search_start
 from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.layout import optimum_path, read_manifest
-from lonlib.storage.result_path import RESULT_PATH_VERSION
+from lonlib.storage.result_path import KNOWN_RESULT_PATH_VERSIONS, RESULT_PATH_VERSION
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
 from lonlib.task.policy import actor_spec
@@ -186,9 +186,23 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     config, trials = load_experiment(folder)
     versions = session_versions(folder)
     current = bool(versions) and all(v == RESULT_PATH_VERSION for v in versions)
-    report = VerifyReport(folder, trials=len(trials), current_version=current)
-    mismatch = "error" if current else "warning"
-    if not current:
+    unknown = sorted({str(v) for v in versions if v is not None} - set(KNOWN_RESULT_PATH_VERSIONS))
+    report = VerifyReport(folder, trials=len(trials), current_version=current or bool(unknown))
+    mismatch = "error" if current or unknown else "warning"
+    if unknown:
+        report.findings.append(
+            Finding(
+                "error",
+                "version",
+                None,
+                None,
+                None,
+                f"manifest.json: sessions ran result-path version(s) {unknown}, which this code "
+                f"does not know (known: {list(KNOWN_RESULT_PATH_VERSIONS)}); every mismatch "
+                "stays an error",
+            )
+        )
+    elif not current:
         found = sorted({str(v) for v in versions})
         report.findings.append(
             Finding(

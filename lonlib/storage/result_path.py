@@ -33,6 +33,10 @@ import numpy as np
 import pandas as pd
 
 RESULT_PATH_VERSION = "2"
+KNOWN_RESULT_PATH_VERSIONS = ("1", "2")
+"""Every version in the history above. Numbers sampled under an older one may differ from
+this code's (a mismatch is a warning there); a version not listed (a future one, or a
+hand-edited manifest) is never a reason to excuse a mismatch."""
 
 # Stored columns that measure time, not results.
 TIMING_COLUMNS = ("seconds",)
