@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from lonlib.config.ddpg import (
     EXECUTION_ONLY_DDPG_FIELDS,
@@ -26,6 +25,7 @@ from lonlib.util.validation import (
     check_keys,
     check_range,
     is_finite,
+    read_yaml_mapping,
 )
 
 EXECUTORS = ("auto", "serial", "pool", "dask", "lockstep")  # lonlib.experiment.executors
@@ -286,11 +286,4 @@ def load_config(spec: str | Path) -> ExperimentConfig:
         raise ValueError(f"configuration {spec!r} is neither one of {NAMED_CONFIGS} nor a file")
     if not path.is_file():
         raise ValueError(f"{path}: is a folder, not a configuration file")
-    try:
-        values = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as error:
-        raise ValueError(f"{path}: not valid YAML ({error})") from None
-    if not isinstance(values, dict):
-        raise ValueError(f"{path}: expected a mapping of configuration keys")
-    values.setdefault("name", path.stem)
-    return ExperimentConfig.from_mapping(values)
+    return ExperimentConfig.from_mapping(read_yaml_mapping(path, "configuration"))

@@ -85,16 +85,67 @@ def check_name(name: Any) -> None:
         raise ValueError(f"name must be letters, digits, '-' or '_', got {name!r}")
 
 
+MAX_CONFIG_BYTES = 1_000_000
+"""A configuration file larger than this is refused (a real one is a few kB)."""
+MAX_CONFIG_DEPTH = 32
+"""How deeply a configuration's lists and mappings may nest."""
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with a nesting bound, and no alias (``*name``) to a list or
+    mapping: such aliases let a few lines expand without bound (a billion-laughs file)."""
+
+    depth = 0
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            node = super().compose_node(parent, index)
+            if not isinstance(node, yaml.ScalarNode):
+                mark = node.start_mark
+                raise ValueError(
+                    f"line {mark.line + 1}: a YAML alias to a list or mapping is not allowed in "
+                    "a configuration (it can expand without bound); write the values out"
+                )
+            return node
+        self.depth += 1
+        try:
+            if self.depth > MAX_CONFIG_DEPTH:
+                mark = self.peek_event().start_mark
+                raise ValueError(
+                    f"line {mark.line + 1}: nested more than {MAX_CONFIG_DEPTH} levels deep"
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+
 def read_yaml_mapping(path: Path, what: str) -> dict[str, Any]:
     """The mapping in a YAML configuration file, ``name`` defaulting to the file's stem;
-    ValueError naming the file if it is not valid YAML or not a mapping of ``what`` keys."""
+    ValueError naming the file if it is larger than :data:`MAX_CONFIG_BYTES`, not UTF-8, not
+    valid YAML, nested deeper than :data:`MAX_CONFIG_DEPTH`, uses an alias to a list or
+    mapping, or is not a mapping of ``what`` keys."""
+    path = Path(path)
+    data = path.read_bytes()
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ValueError(
+            f"{path}: {len(data):,} bytes, more than a configuration needs (at most "
+            f"{MAX_CONFIG_BYTES:,})"
+        )
     try:
-        values = yaml.safe_load(Path(path).read_text()) or {}
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(
+            f"{path}: not UTF-8 text (byte 0x{data[error.start]:02x} at position {error.start})"
+        ) from None
+    try:
+        values = yaml.load(text, Loader=_BoundedLoader) or {}
     except yaml.YAMLError as error:
         raise ValueError(f"{path}: not valid YAML ({error})") from None
+    except ValueError as error:
+        raise ValueError(f"{path}: {error}") from None
     if not isinstance(values, dict):
         raise ValueError(f"{path}: expected a mapping of {what} keys")
-    values.setdefault("name", Path(path).stem)
+    values.setdefault("name", path.stem)
     return values
 
 
