@@ -46,3 +46,33 @@ def test_a_scalar_alias_is_still_fine(tmp_path):
     path.write_text("runs: &n 2\nmax_local_searches: *n\n")
     config = load_config(path)
     assert config.runs == 2 and config.max_local_searches == 2
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda config: config.update(tolerance=float("nan")), "tolerance"),
+        (lambda config: config.update(a_future_key=1), "a_future_key"),
+    ],
+    ids=["nan-tolerance", "future-key"],
+)
+def test_a_manifest_with_a_bad_stored_value_names_the_manifest_and_the_field(
+    tmp_path, change, message
+):
+    import json
+    import shutil
+    from pathlib import Path
+
+    from lonlib.storage import CorruptDataError
+    from lonlib.storage.layout import stored_config
+
+    root = Path(__file__).resolve().parents[1] / "data" / "reference"
+    folder = tmp_path / "copy"
+    folder.mkdir()
+    shutil.copy(root / "manifest.json", folder / "manifest.json")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    change(manifest["config"])
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(CorruptDataError, match=message) as refused:
+        stored_config(folder)
+    assert str(refused.value).startswith(f"{folder / 'manifest.json'}: ")

@@ -14,7 +14,7 @@ import pandas as pd
 
 from lonlib.config import ExperimentConfig
 from lonlib.lon.graphs import build_lon, sinks
-from lonlib.storage.layout import read_manifest
+from lonlib.storage.layout import stored_config
 from lonlib.storage.trials import read_finished_trials
 
 
@@ -70,7 +70,7 @@ class StoredExperiment:
         """The experiment stored in ``folder`` (its manifest's configuration, its trials)."""
         folder = Path(folder)
         trials = read_finished_trials(folder)
-        config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
+        config = stored_config(folder)
         return cls(folder, config, trials, fitness_tolerance)
 
     @cached_property

@@ -56,7 +56,7 @@ from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
 from lonlib.lon.metrics import lon_metrics
-from lonlib.storage.layout import optimum_path, read_manifest
+from lonlib.storage.layout import optimum_path, stored_config
 from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
 from lonlib.util.figures import save_png
@@ -68,7 +68,7 @@ def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]
     """The stored configuration and all trials of an experiment folder."""
     folder = Path(folder)
     trials = read_finished_trials(folder)
-    return ExperimentConfig.from_mapping(read_manifest(folder)["config"]), trials
+    return stored_config(folder), trials
 
 
 @dataclass

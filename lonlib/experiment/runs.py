@@ -14,7 +14,7 @@ from lonlib.config import ExperimentConfig
 from lonlib.search.algorithm import BasinHoppingRun, RunState, random_parameters
 from lonlib.storage.atomic import remove_temporary_files
 from lonlib.storage.inflight import Plan
-from lonlib.storage.layout import RUN_LOCK, read_manifest, run_dir
+from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import load_run_state
 
@@ -73,7 +73,7 @@ def experiment_plan(out: str | Path, config: ExperimentConfig) -> Plan:
     or runs than earlier ones did)."""
     perturbations, runs = set(config.perturbations), config.runs
     try:
-        stored = ExperimentConfig.from_mapping(read_manifest(Path(out))["config"])
+        stored = stored_config(Path(out))
     except Exception:  # none yet, or unreadable (sampling refuses to start then)
         return perturbations, runs
     return perturbations | set(stored.perturbations), max(runs, stored.runs)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from lonlib.config import ExperimentConfig
 from lonlib.storage.atomic import CorruptDataError, MissingExperimentError, read_json
 from lonlib.util.labels import p_label
 
@@ -73,3 +74,18 @@ def optimum_path(root: Path, p: float, run: int, index: int) -> Path:
 def history_path(root: Path, p: float, run: int, index: int) -> Path:
     """The per-episode training record of local search ``index`` of one run."""
     return run_dir(root, p, run) / f"history_{index:04d}.parquet"
+
+
+def stored_config(root: Path) -> ExperimentConfig:
+    """The configuration an experiment folder was sampled with, from its manifest; a bad
+    stored value (``tolerance: NaN``, a key this code does not know) is CorruptDataError
+    naming ``manifest.json`` and the field."""
+    return config_of_manifest(read_manifest(root), Path(root) / "manifest.json")
+
+
+def config_of_manifest(manifest: dict, path: Path) -> ExperimentConfig:
+    """:func:`stored_config` of an already read manifest (``path`` names it in errors)."""
+    try:
+        return ExperimentConfig.from_mapping(manifest["config"])
+    except (ValueError, TypeError, KeyError) as error:
+        raise CorruptDataError(f"{path}: its stored configuration is not valid: {error}") from None

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lonlib.storage.atomic import read_json, write_json
-from lonlib.storage.layout import checked_manifest
+from lonlib.storage.layout import checked_manifest, config_of_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.trials import runs_ending_early
 
@@ -101,7 +101,7 @@ def updated_manifest(
     now = datetime.now(UTC).isoformat(timespec="seconds")
     if path.exists():
         manifest = checked_manifest(read_json(path), path)
-        stored = type(config).from_mapping(manifest["config"])
+        stored = config_of_manifest(manifest, path)
         changed = _changed_fields(stored, config)
         refused = [key for key in changed if key not in allow_changes]
         if refused:

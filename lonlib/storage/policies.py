@@ -19,8 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from lonlib.config import ExperimentConfig
-from lonlib.storage.layout import optimum_path, read_manifest
+from lonlib.storage.layout import optimum_path, stored_config
 from lonlib.storage.trials import read_optimum
 from lonlib.task.policy import actor_spec, forward_numpy
 
@@ -54,7 +53,7 @@ def load_policy(folder: str | Path, p: float, run: int, index: int) -> StoredPol
     experiment ``folder``, as a :class:`StoredPolicy` (ValueError naming the file when it is
     not stored)."""
     root = Path(folder)
-    config = ExperimentConfig.from_mapping(read_manifest(root)["config"])
+    config = stored_config(root)
     path = optimum_path(root, p, run, index)
     if not path.is_file():
         raise ValueError(f"{path}: no stored Actor (is p={p!r}, run={run}, index={index} right?)")

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.config import ExperimentConfig
 from lonlib.storage.inflight import inflight_checkpoints
-from lonlib.storage.layout import read_manifest, trials_path
+from lonlib.storage.layout import stored_config, trials_path
 from lonlib.storage.trials import read_trials, replay_trials
 
 
@@ -23,7 +22,7 @@ def run_status(out: str | Path) -> pd.DataFrame:
     values with ``x`` after each rejected one. Reads the trials and the manifest only: an
     optimum file that is missing or damaged shows when the run resumes, not here."""
     out = Path(out)
-    config = ExperimentConfig.from_mapping(read_manifest(out)["config"])
+    config = stored_config(out)
     saved: dict[tuple[float, int], int] = {}
     for checkpoint in inflight_checkpoints(out):
         for key, steps in zip(checkpoint.runs, checkpoint.steps, strict=True):
