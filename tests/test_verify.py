@@ -86,8 +86,8 @@ def test_a_changed_fitness_a_changed_descriptor_and_a_lost_actor_are_errors(dama
     assert "[fitness]" in capsys.readouterr().out
 
 
-def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
-    folder, trials = damaged
+def shift_fitness_and_stamp(folder, trials, version, sessions=slice(None)):
+    """Every fitness of the first run +0.5, and ``sessions`` stamped with ``version``."""
     first = trials.iloc[0]
 
     def damage(table):
@@ -96,9 +96,14 @@ def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
     rewrite(folder, float(first.p), int(first.run), damage)
     manifest = folder / "manifest.json"
     data = json.loads(manifest.read_text())
-    for session in data["sessions"]:
-        session["result_path_version"] = "1"  # a known, older version
+    for session in data["sessions"][sessions]:
+        session["result_path_version"] = version
     manifest.write_text(json.dumps(data))
+
+
+def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
+    folder, trials = damaged
+    shift_fitness_and_stamp(folder, trials, "1")  # a known, older version
     report = verify_experiment(folder)
     assert report.ok and not report.current_version
     assert {f.check for f in report.warnings} >= {"version", "fitness"}
@@ -109,16 +114,7 @@ def test_an_unknown_result_path_version_never_turns_an_error_into_a_warning(
     damaged, version, capsys
 ):
     folder, trials = damaged
-    first = trials.iloc[0]
-
-    def damage(table):
-        table["fitness"] += 0.5
-
-    rewrite(folder, float(first.p), int(first.run), damage)
-    manifest = folder / "manifest.json"
-    data = json.loads(manifest.read_text())
-    data["sessions"][-1]["result_path_version"] = version
-    manifest.write_text(json.dumps(data))
+    shift_fitness_and_stamp(folder, trials, version, slice(-1, None))  # the last session
     report = verify_experiment(folder)
     assert not report.ok
     assert {f.check for f in report.errors} >= {"version", "fitness"}
