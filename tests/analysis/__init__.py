@@ -1,0 +1,1 @@
+"""lonlib.analysis: the claims and their power, summary, holding, plots, recordings, verify."""

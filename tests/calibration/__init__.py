@@ -1,0 +1,1 @@
+"""lonlib.calibration: the calibration study, the learner-side study and the hold test."""

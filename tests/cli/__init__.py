@@ -1,0 +1,1 @@
+"""lonlib.cli: the lonlib command line as a user meets it."""

@@ -1,0 +1,1 @@
+"""lonlib.config: configurations, their validation and YAML loading (fuzzed, hostile files)."""

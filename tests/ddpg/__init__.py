@@ -1,0 +1,1 @@
+"""lonlib.ddpg: the DDPG local search, its learners, nets, random streams and devices."""

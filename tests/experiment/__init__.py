@@ -1,0 +1,1 @@
+"""lonlib.experiment: runs, executors (lockstep), in-flight checkpoints, draining, faults."""

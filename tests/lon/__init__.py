@@ -1,0 +1,1 @@
+"""lonlib.lon: LONs, their metrics, trace and graph files, behaviour nodes."""

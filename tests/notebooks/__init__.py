@@ -1,0 +1,1 @@
+"""The notebooks under papermill and in JupyterLab, and lonlib.notebook_run (papermill's engine)."""

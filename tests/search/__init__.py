@@ -1,0 +1,1 @@
+"""lonlib.search: Algorithm 2 (basin hopping over local searches)."""

@@ -1,0 +1,1 @@
+"""lonlib.storage: the result path, manifests and sessions, thinning, stored policies."""

@@ -1,0 +1,1 @@
+"""lonlib.task: simulator, Gymnasium env, controllers, rollout (numpy, compiled), behaviour."""

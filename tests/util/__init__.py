@@ -1,0 +1,1 @@
+"""lonlib.util: small utilities (byte-stable figures, notebook paths)."""
