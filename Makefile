@@ -49,7 +49,7 @@ help:
 	@echo "             (run it before make lock; never part of make test or CI)"
 	@echo "make lock    resolve pyproject.toml's ranges again into $(REQ)/*.txt (newest versions;"
 	@echo "             LOCK_UPGRADE= keeps the current pins where they still fit) and environment.yml"
-	@echo "make test-browser  JupyterLab driven in headless Chromium (tests/test_browser.py)"
+	@echo "make test-browser  JupyterLab driven in headless Chromium (tests/notebooks/test_browser.py)"
 	@echo "make bench   set up, then run the benchmarks (writes benchmarks/results/*.json)"
 	@echo "make reproduce [CONFIG=quick|paper|file.yaml] [WORKERS=2] [SCHEDULER=tcp://host:8786]"
 	@echo "             [EXECUTOR=serial|pool|dask|lockstep] [SLOTS=16] [DEVICE=cpu|cuda]"
@@ -58,7 +58,7 @@ help:
 	@echo "             experiment again, with the paper's claims tested (never samples)"
 	@echo "make lab     set up, then start JupyterLab on the project (opens at notebooks/)"
 	@echo "make docs    set up, then build the documentation site into site/ (offline, --strict;"
-	@echo "             tests/test_docs.py builds it in make test)"
+	@echo "             tests/project/test_docs.py builds it in make test)"
 	@echo "make mutants apply each result-changing mutant in tests/mutants.py; all must be killed"
 	@echo "make lint    ruff check + ruff format --check + mypy (strict on [tool.mypy]'s files)"
 	@echo "make clean   remove $(VENV), $(LATEST) and caches (never data/)"
@@ -134,7 +134,7 @@ mutants: setup
 	$(BIN)/python tests/mutants.py --jobs $(or $(JOBS),2)
 
 test-browser: $(VENV)/.lab-installed
-	$(BIN)/python -m pytest -q tests/test_browser.py
+	$(BIN)/python -m pytest -q tests/notebooks/test_browser.py
 
 lint: setup
 	$(BIN)/ruff check .
@@ -191,7 +191,7 @@ reproduce: setup
 	echo "  notebooks/    the executed notebooks;  p=*/run_*/  trials and optima"
 
 # The documentation site (MkDocs + mkdocstrings, docs/ and mkdocs.yml): offline, and --strict so
-# that a broken link or reference fails (make test builds it too: tests/test_docs.py).
+# that a broken link or reference fails (make test builds it too: tests/project/test_docs.py).
 docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 

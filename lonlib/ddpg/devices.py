@@ -4,7 +4,7 @@ test-only switch that makes the CPU behave as a device.
 The lockstep step keeps its state on the learner's device: replay rows, positions and fill
 levels, the slots' step counters and busy mask, stream keys, replay indices, Adam step
 counts and coefficients, loss sums. Per environment step only two copies cross
-(:class:`TransferLog` counts them; ``tests/test_devices.py`` asserts it): the environment's
+(:class:`TransferLog` counts them; ``tests/ddpg/test_devices.py`` asserts it): the environment's
 outputs (rewards, next observations, ends) go to the device, and the actions come back.
 Everything else crosses at events, and only what the event's slots need: at an episode end
 those slots' indices go and their parameters and loss sums come back (the greedy evaluation

@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 # The checkpoint layout's version: bump it when the layout of
 # lonlib.ddpg.checkpoint.to_checkpoint changes
-# (tests/test_inflight.py fails until the new layout is written down there).
+# (tests/experiment/test_inflight.py fails until the new layout is written down there).
 FORMAT = 3
 # A batch's id and a write's id (the names of its files): what new_id makes. Files of other
 # names are never read, and never used as patterns to find files by (a name "*" would be).

@@ -7,7 +7,7 @@ Each session of an experiment records it in the manifest (:mod:`lonlib.storage.m
 reader knows which sessions' numbers came from which code;
 :func:`lonlib.storage.manifest.sessions_with_other_result_path` lists the others.
 
-The golden test ``tests/test_result_path.py`` guards it: it samples a tiny experiment and
+The golden test ``tests/storage/test_result_path.py`` guards it: it samples a tiny experiment and
 compares :func:`experiment_digest` with a committed value. If that test fails and the change
 is meant to alter results, bump ``RESULT_PATH_VERSION`` and update the golden digest in the
 same commit. Changes that keep every stored number (speed, storage layout readers, plots,
