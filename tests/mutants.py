@@ -53,57 +53,81 @@ DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
 STUDY = "lonlib/calibration/study.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
-ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
+ONE_ROLLOUT = [
+    "tests/task/test_rollout.py",
+    "tests/storage/test_result_path.py",
+    "tests/analysis/test_verify.py",
+]
 GUARDS = {
     DDPG: [
-        "tests/test_ddpg.py",
-        "tests/test_devices.py",
-        "tests/test_lockstep.py",
-        "tests/test_study.py",
+        "tests/ddpg/test_ddpg.py",
+        "tests/ddpg/test_devices.py",
+        "tests/experiment/test_lockstep.py",
+        "tests/calibration/test_study.py",
     ],
     SLOTS: [
-        "tests/test_ddpg.py",
-        "tests/test_devices.py",
-        "tests/test_lockstep.py",
-        "tests/test_study.py",
+        "tests/ddpg/test_ddpg.py",
+        "tests/ddpg/test_devices.py",
+        "tests/experiment/test_lockstep.py",
+        "tests/calibration/test_study.py",
     ],
     TRAINER_CHECKPOINT: [
-        "tests/test_ddpg.py",
-        "tests/test_devices.py",
-        "tests/test_lockstep.py",
-        "tests/test_study.py",
-        "tests/test_inflight.py",
+        "tests/ddpg/test_ddpg.py",
+        "tests/ddpg/test_devices.py",
+        "tests/experiment/test_lockstep.py",
+        "tests/calibration/test_study.py",
+        "tests/experiment/test_inflight.py",
     ],
-    REPLAY: ["tests/test_devices.py", "tests/test_ddpg.py", "tests/test_lockstep.py"],
+    REPLAY: [
+        "tests/ddpg/test_devices.py",
+        "tests/ddpg/test_ddpg.py",
+        "tests/experiment/test_lockstep.py",
+    ],
     STREAMS: [
-        "tests/test_random_streams.py",
-        "tests/test_devices.py",
-        "tests/test_ddpg.py",
-        "tests/test_lockstep.py",
+        "tests/ddpg/test_random_streams.py",
+        "tests/ddpg/test_devices.py",
+        "tests/ddpg/test_ddpg.py",
+        "tests/experiment/test_lockstep.py",
     ],
-    DEVICES: ["tests/test_devices.py", "tests/test_random_streams.py", "tests/test_lockstep.py"],
-    LOCKSTEP: ["tests/test_lockstep.py", "tests/test_drain.py"],
-    CHECKPOINTS: ["tests/test_lockstep.py", "tests/test_inflight.py"],
-    CONFIGS: ["tests/test_ddpg.py", "tests/test_lockstep.py", "tests/test_study.py"],
+    DEVICES: [
+        "tests/ddpg/test_devices.py",
+        "tests/ddpg/test_random_streams.py",
+        "tests/experiment/test_lockstep.py",
+    ],
+    LOCKSTEP: ["tests/experiment/test_lockstep.py", "tests/experiment/test_drain.py"],
+    CHECKPOINTS: ["tests/experiment/test_lockstep.py", "tests/experiment/test_inflight.py"],
+    CONFIGS: [
+        "tests/ddpg/test_ddpg.py",
+        "tests/experiment/test_lockstep.py",
+        "tests/calibration/test_study.py",
+    ],
     LEAN: [
-        "tests/test_ddpg.py",
-        "tests/test_ddpg_update.py",
-        "tests/test_devices.py",
-        "tests/test_lockstep.py",
+        "tests/ddpg/test_ddpg.py",
+        "tests/ddpg/test_ddpg_update.py",
+        "tests/ddpg/test_devices.py",
+        "tests/experiment/test_lockstep.py",
     ],
-    AUTOGRAD: ["tests/test_ddpg.py", "tests/test_ddpg_update.py"],
-    BH: ["tests/test_basin_hopping.py"],
+    AUTOGRAD: ["tests/ddpg/test_ddpg.py", "tests/ddpg/test_ddpg_update.py"],
+    BH: ["tests/search/test_basin_hopping.py"],
     # the numpy definition is the kernels' oracle: only test_compiled_rollout runs it
-    SIM: ["tests/test_pendulum.py", "tests/test_rollout.py", "tests/test_compiled_rollout.py"],
-    ROLLOUT: [*ONE_ROLLOUT, "tests/test_study.py"],
-    NETS: ["tests/test_nets.py", *ONE_ROLLOUT, "tests/test_compiled_rollout.py"],
-    PMATH: [*ONE_ROLLOUT, "tests/test_compiled_rollout.py"],
-    BEHAVIOUR: ["tests/test_behaviour.py", *ONE_ROLLOUT, "tests/test_calibration.py"],
-    VERIFY: ["tests/test_verify.py"],
-    STUDY: ["tests/test_study.py"],
-    HOLDING: ["tests/test_holding.py", "tests/test_verify.py"],
-    POWER: ["tests/test_claims_power.py"],
-    KERNELS: ["tests/test_compiled_rollout.py"],
+    SIM: [
+        "tests/task/test_pendulum.py",
+        "tests/task/test_rollout.py",
+        "tests/task/test_compiled_rollout.py",
+    ],
+    ROLLOUT: [*ONE_ROLLOUT, "tests/calibration/test_study.py"],
+    NETS: ["tests/ddpg/test_nets.py", *ONE_ROLLOUT, "tests/task/test_compiled_rollout.py"],
+    PMATH: [*ONE_ROLLOUT, "tests/task/test_compiled_rollout.py"],
+    BEHAVIOUR: [
+        "tests/task/test_behaviour.py",
+        *ONE_ROLLOUT,
+        "tests/calibration/test_calibration.py",
+    ],
+    VERIFY: ["tests/analysis/test_verify.py"],
+    STUDY: ["tests/calibration/test_study.py"],
+    HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
+    POWER: ["tests/analysis/test_claims_power.py"],
+    KERNELS: ["tests/task/test_compiled_rollout.py"],
 }
 
 MUTANTS = [
@@ -436,7 +460,7 @@ MUTANTS = [
         "device: the streams hash int32 counters",
     ),
     # tensors on the wrong device, waits and copies the CPU's results cannot show: the meta
-    # device, the transfer counts and the crossings guard (tests/test_devices.py) catch them
+    # device, the transfer counts and the crossings guard (tests/ddpg/test_devices.py) catch them
     Mutant(
         DEVICES,
         "out = torch.tensor(np.asarray(values), dtype=dtype, device=device)",
@@ -953,6 +977,11 @@ def main(argv: list[str]) -> int:
         )
         return 0
     selected = [m for m in MUTANTS if (not argv or argv[0] in m.why) and where in str(m.path)]
+    # a guard that is not a file would fail pytest and count every mutant as killed
+    missing = sorted({t for m in selected for t in GUARDS[m.path] if not (ROOT / t).is_file()})
+    if missing:
+        print(f"guard test files not found (keep GUARDS in step with tests/): {missing}")
+        return 1
     with tempfile.TemporaryDirectory(prefix="lonlib-mutants-") as tmp:
         free: queue.Queue[Path] = queue.Queue()
         for slot in range(jobs):
