@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 import lonlib  # noqa: F401  (first: it pins torch's CPU kernels before any test uses torch)
+from lonlib.config import DDPGConfig
 
 # One cart, 40-step episodes, a "swing high" fitness (upright within 2.9 rad of the top),
 # and a DDPG budget of 150 steps: fitness values vary, so LONs are not trivial.
@@ -23,6 +24,17 @@ env: {n_carts: 1, steps: 40, upright_angle: 2.9, motor: acceleration, motor_gain
 ddpg: {batch_size: 32, buffer_size: 500, warmup_steps: 50, max_steps: MAX, min_steps: 0,
        patience_steps: 1000}
 """
+
+
+# The DDPG settings of the tests' small, fast local searches (the tiny experiment's above too):
+# batches of 32 from a replay of 500 transitions, 50 warm-up steps, no minimum length.
+TINY_DDPG = {"batch_size": 32, "buffer_size": 500, "warmup_steps": 50, "min_steps": 0}
+
+
+def tiny_ddpg(**overrides) -> DDPGConfig:
+    """A :class:`DDPGConfig` of :data:`TINY_DDPG`'s settings, then ``overrides``
+    (``tiny_ddpg(max_steps=120, patience_steps=10**6)``)."""
+    return DDPGConfig(**{**TINY_DDPG, **overrides})
 
 
 def write_tiny_yaml(folder: Path, max_steps: int = 150) -> Path:

@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 import torch
 
-from lonlib.config import DDPGConfig, PendulumConfig
+from lonlib.config import PendulumConfig
 from lonlib.ddpg.lean import LeanDDPG
 from lonlib.ddpg.learner import learner_class
 from lonlib.ddpg.reference import AutogradDDPG
 from lonlib.ddpg.search import local_search_batch
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
+from tests.conftest import tiny_ddpg
 
 HP = {"learning_rate": 1e-3, "gamma": 0.99, "tau": 0.005}
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
@@ -122,14 +123,13 @@ def test_bad_shapes_and_kinds_are_refused():
 @pytest.mark.parametrize("device", DEVICES)
 def test_local_search_is_the_same_with_either_learner(device):
     env = PendulumConfig(n_carts=1, steps=40, initial_noise=0.02)
-    base = {"batch_size": 32, "buffer_size": 500, "warmup_steps": 50, "max_steps": 160}
     thetas, omegas = initial(1, 2)
     runs = {
         kind: local_search_batch(
             thetas,
             omegas,
             env,
-            DDPGConfig(min_steps=0, update=kind, device=device, **base),
+            tiny_ddpg(max_steps=160, update=kind, device=device),
             seeds=[1, 2],
         )
         for kind in ("lean", "autograd")

@@ -37,16 +37,10 @@ from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.streams import EXPLORATION_NOISE, REPLAY_SAMPLES, WARMUP_ACTIONS, CounterStreams
 from lonlib.ddpg.trainer import SlotTrainer, check_device, exploration_actions
 from lonlib.task.policy import actor_spec, critic_spec
+from tests.conftest import tiny_ddpg
 
 ENV = PendulumConfig(n_carts=1, steps=400)
-HP = DDPGConfig(
-    batch_size=32,
-    buffer_size=500,
-    warmup_steps=50,
-    max_steps=10**6,
-    min_steps=10**6,
-    patience_steps=10**6,
-)
+HP = tiny_ddpg(max_steps=10**6, min_steps=10**6, patience_steps=10**6)
 DEVICES_MODULE = "lonlib/ddpg/devices.py"
 # the package's folder: a checkout may itself lie in a folder named lonlib
 PACKAGE = Path(lonlib.__file__).parent.as_posix() + "/"

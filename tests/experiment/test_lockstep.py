@@ -9,11 +9,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lonlib.config import DDPGConfig, ExperimentConfig, PendulumConfig
+from lonlib.config import ExperimentConfig, PendulumConfig
 from lonlib.experiment.running import run_experiment, run_one, status
 from lonlib.storage.status import run_status
 from lonlib.storage.trials import read_experiment_trials
-from tests.conftest import built_once
+from tests.conftest import built_once, tiny_ddpg
 
 # Searches stop by patience at different times, so slots are refilled while others are in
 # their warm-up or training: a run's trials must still not depend on its neighbours.
@@ -31,14 +31,7 @@ CONFIG = ExperimentConfig(
         motor_gain=2.0,
         initial_noise=0.02,  # refills draw start noise from the new search's streams
     ),
-    ddpg=DDPGConfig(
-        batch_size=32,
-        buffer_size=500,
-        warmup_steps=50,
-        max_steps=240,
-        min_steps=0,
-        patience_steps=60,
-    ),
+    ddpg=tiny_ddpg(max_steps=240, patience_steps=60),
 )
 TIME_COLUMNS = ["seconds"]
 

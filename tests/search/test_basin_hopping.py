@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from lonlib.config import BasinHoppingConfig, DDPGConfig, PendulumConfig
+from lonlib.config import BasinHoppingConfig, PendulumConfig
 from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.search.algorithm import (
     LocalOptimum,
@@ -13,6 +13,7 @@ from lonlib.search.algorithm import (
     trial_seeds,
 )
 from lonlib.task.policy import actor_spec, critic_spec
+from tests.conftest import tiny_ddpg
 
 START = (np.zeros(6, dtype=np.float32), np.zeros(4, dtype=np.float32))
 
@@ -142,14 +143,7 @@ def test_bad_configuration_is_refused_by_name(field, value):
 
 def test_ddpg_is_the_default_local_search():
     env = PendulumConfig(n_carts=1, steps=40)
-    hp = DDPGConfig(
-        batch_size=32,
-        buffer_size=500,
-        warmup_steps=50,
-        max_steps=120,
-        min_steps=0,
-        patience_steps=10**6,
-    )
+    hp = tiny_ddpg(max_steps=120, patience_steps=10**6)
     rng = np.random.default_rng(0)
     start = (actor_spec(1).initial(rng), critic_spec(1).initial(rng))
     config = BasinHoppingConfig(tolerance=1, max_local_searches=3)

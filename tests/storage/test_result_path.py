@@ -51,6 +51,7 @@ GOLDEN_CONFIG = dataclasses.replace(
     tolerance=2,
     max_local_searches=3,
     env=dataclasses.replace(named_config("quick").env, steps=60, upright_angle=2.9),
+    # written out (not tests.conftest.tiny_ddpg): the golden input never follows shared settings
     ddpg=DDPGConfig(
         batch_size=32,
         buffer_size=500,
