@@ -51,7 +51,7 @@ BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
-STUDY = "lonlib/calibration/study.py"
+JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
 ONE_ROLLOUT = ["tests/test_rollout.py", "tests/test_result_path.py", "tests/test_verify.py"]
 GUARDS = {
@@ -100,7 +100,7 @@ GUARDS = {
     PMATH: [*ONE_ROLLOUT, "tests/test_compiled_rollout.py"],
     BEHAVIOUR: ["tests/test_behaviour.py", *ONE_ROLLOUT, "tests/test_calibration.py"],
     VERIFY: ["tests/test_verify.py"],
-    STUDY: ["tests/test_study.py"],
+    JUDGED_LOG: ["tests/test_study.py"],
     HOLDING: ["tests/test_holding.py", "tests/test_verify.py"],
     POWER: ["tests/test_claims_power.py"],
     KERNELS: ["tests/test_compiled_rollout.py"],
@@ -128,7 +128,7 @@ MUTANTS = [
         "the robust estimate traces only the first judged episode",
     ),
     Mutant(
-        STUDY,
+        JUDGED_LOG,
         'rows["fitness_mean"].append(d.fitness_mean)',
         'rows["fitness_mean"].append(d.fitness_all)',
         "the judged log's mean aggregation is the all one",
@@ -152,7 +152,7 @@ MUTANTS = [
         "judge_every may outlast the patience",
     ),
     Mutant(
-        STUDY,
+        JUDGED_LOG,
         "d = describe_rollout(nominal, self.env, row)",
         "d = describe_rollout(nominal, self.env, 0)",
         "judged policies described from the batch's first episode",
