@@ -51,7 +51,7 @@ BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
-STUDY = "lonlib/calibration/study.py"
+JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
 ONE_ROLLOUT = [
     "tests/task/test_rollout.py",
@@ -124,7 +124,7 @@ GUARDS = {
         "tests/calibration/test_calibration.py",
     ],
     VERIFY: ["tests/analysis/test_verify.py"],
-    STUDY: ["tests/calibration/test_study.py"],
+    JUDGED_LOG: ["tests/calibration/test_study.py"],
     HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
     POWER: ["tests/analysis/test_claims_power.py"],
     KERNELS: ["tests/task/test_compiled_rollout.py"],
@@ -152,7 +152,7 @@ MUTANTS = [
         "the robust estimate traces only the first judged episode",
     ),
     Mutant(
-        STUDY,
+        JUDGED_LOG,
         'rows["fitness_mean"].append(d.fitness_mean)',
         'rows["fitness_mean"].append(d.fitness_all)',
         "the judged log's mean aggregation is the all one",
@@ -176,7 +176,7 @@ MUTANTS = [
         "judge_every may outlast the patience",
     ),
     Mutant(
-        STUDY,
+        JUDGED_LOG,
         "d = describe_rollout(nominal, self.env, row)",
         "d = describe_rollout(nominal, self.env, 0)",
         "judged policies described from the batch's first episode",

@@ -1,5 +1,6 @@
 """The calibration study run end to end: every unfinished cell (:mod:`lonlib.calibration.study`),
-then its report (:mod:`lonlib.calibration.report`) from the cells stored."""
+then its report (:mod:`lonlib.calibration.report`) from the cells stored
+(:mod:`lonlib.calibration.cell_store`)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ import multiprocessing
 from datetime import UTC, datetime
 from pathlib import Path
 
+from lonlib.calibration.cell_store import read_cell
 from lonlib.calibration.report import CalibrationResult, write_outputs
-from lonlib.calibration.study import cell_starts, read_cell, run_and_store_cell
+from lonlib.calibration.study import cell_starts, run_and_store_cell
 from lonlib.config import CalibrationConfig
 from lonlib.storage.atomic import atomic_write, write_json
 from lonlib.util.progress import progress_bar

@@ -20,7 +20,7 @@ DDPG seed (common random numbers); the control draws from the same streams.
 
 A search returns its best-so-far, which starts near the top, so that number says nothing.
 Every judged policy is recorded (env step, fitness under both aggregations, behaviour label,
-:class:`lonlib.calibration.study.JudgedLog`), and per search the record keeps the **last
+:class:`lonlib.calibration.judged_log.JudgedLog`), and per search the record keeps the **last
 judged fitness**, the share of judged policies >= ``hold_fitness`` after the first
 ``late_steps`` env steps, and the label of the last judged policy.
 
@@ -52,7 +52,7 @@ import pandas as pd
 
 from lonlib.calibration.imitation import DEFAULT_TEACHER
 from lonlib.calibration.inflight import CellCheckpoint
-from lonlib.calibration.study import JudgedLog
+from lonlib.calibration.judged_log import JudgedLog
 from lonlib.config import DDPGConfig, PendulumConfig, named_config
 from lonlib.ddpg.slots import LocalSearchResult
 from lonlib.ddpg.trainer import SlotTrainer

@@ -3,7 +3,7 @@
 :func:`write_outputs` reads the cells :func:`lonlib.calibration.campaign.run_calibration`
 stored and writes ``calibration.csv`` (one row per cell, :func:`cell_table`),
 ``searches.csv`` (one row per search, :func:`search_table`), ``drift.csv``
-(:func:`lonlib.calibration.study.integrator_drift`), ``calibration.md``
+(:func:`lonlib.calibration.drift.integrator_drift`), ``calibration.md``
 (:func:`calibration_markdown`, the table of docs/calibration.md) and ``calibration.png``
 (:func:`calibration_figure`, drawn with seaborn under the figures' one theme).
 """
@@ -21,13 +21,13 @@ import numpy as np
 import pandas as pd
 import seaborn as sns
 
-from lonlib.calibration.study import (
+from lonlib.calibration.cell_store import read_cell
+from lonlib.calibration.drift import integrator_drift
+from lonlib.calibration.summaries import (
     AGGREGATIONS,
     BALANCING_FITNESS,
     CELL_COLUMNS,
     history_summary,
-    integrator_drift,
-    read_cell,
 )
 from lonlib.config import CalibrationConfig
 from lonlib.storage.atomic import atomic_write
@@ -63,7 +63,7 @@ def search_table(records: list[dict[str, Any]]) -> pd.DataFrame:
     return table
 
 
-# The per-search columns of the learner-side study (lonlib.calibration.study.judged_summary).
+# The per-search columns of the learner-side study (lonlib.calibration.summaries.judged_summary).
 JUDGED_STEPS = tuple(
     f"first_{event}_{a}_steps" for a in AGGREGATIONS for event in ("090", "balancing", "rod_up")
 )

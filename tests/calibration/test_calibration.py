@@ -102,7 +102,7 @@ def test_first_nonzero_step_is_read_from_the_training_history(tiny_study):
 
 
 def test_history_summary_finds_the_first_nonzero_and_the_first_balancing_policy():
-    from lonlib.calibration.study import BALANCING_FITNESS, history_summary
+    from lonlib.calibration.summaries import BALANCING_FITNESS, history_summary
 
     steps = [100, 200, 300, 400, 500]
     fitness = [float("nan"), 0.0, 0.3, BALANCING_FITNESS, 0.5]

@@ -14,8 +14,9 @@ import yaml
 import lonlib.calibration.inflight as inflight
 import lonlib.calibration.study as study
 from lonlib.calibration import run_calibration
+from lonlib.calibration.cell_store import json_roundtrip
 from lonlib.calibration.report import readme_markers, write_outputs
-from lonlib.calibration.study import json_roundtrip, judged_summary
+from lonlib.calibration.summaries import judged_summary
 from lonlib.cli import main
 from lonlib.config import (
     CalibrationConfig,
