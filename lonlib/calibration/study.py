@@ -60,11 +60,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from lonlib.calibration.cell_store import cell_paths, read_arrays, read_cell, write_cell
-from lonlib.calibration.drift import integrator_drift
 from lonlib.calibration.greedy import greedy_rollout
 from lonlib.calibration.inflight import CellCheckpoint
 from lonlib.calibration.judged_log import JudgedLog
-from lonlib.calibration.summaries import CELL_COLUMNS, history_summary, judged_summary
+from lonlib.calibration.summaries import history_summary, judged_summary
 from lonlib.config import CalibrationConfig, Cell
 from lonlib.ddpg.slots import LocalSearchResult
 from lonlib.ddpg.trainer import SlotTrainer
@@ -271,10 +270,10 @@ def run_and_store_cell(
 
 
 __all__ = [
-    "CELL_COLUMNS",
     "CellParameters",
-    "greedy_rollout",
-    "integrator_drift",
-    "judged_summary",
+    "cell_starts",
+    "continue_seed",
+    "run_and_store_cell",
     "run_cell",
+    "seed_streams",
 ]

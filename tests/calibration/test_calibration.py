@@ -9,8 +9,10 @@ import pytest
 
 import lonlib.calibration.study as calibration
 from lonlib.calibration.campaign import run_calibration
+from lonlib.calibration.drift import integrator_drift
+from lonlib.calibration.greedy import greedy_rollout
 from lonlib.calibration.report import search_table
-from lonlib.calibration.study import CELL_COLUMNS, greedy_rollout, integrator_drift
+from lonlib.calibration.summaries import CELL_COLUMNS
 from lonlib.cli import main as cli_main
 from lonlib.config import (
     CalibrationConfig,

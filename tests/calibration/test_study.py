@@ -15,6 +15,7 @@ import lonlib.calibration.inflight as inflight
 import lonlib.calibration.study as study
 from lonlib.calibration import run_calibration
 from lonlib.calibration.cell_store import json_roundtrip
+from lonlib.calibration.drift import integrator_drift
 from lonlib.calibration.report import readme_markers, write_outputs
 from lonlib.calibration.summaries import judged_summary
 from lonlib.cli import main
@@ -219,7 +220,7 @@ def test_the_reports_mark_an_upright_cell_among_cells_stored_before_the_setting(
     rows = study_markdown(table).splitlines()[2:]
     assert "| initial |" in rows[0] and "| initial, upright |" in rows[1]
     cells = calibration_markdown(
-        cell_table(searches, records), study.integrator_drift(TINY.env, steps=20)
+        cell_table(searches, records), integrator_drift(TINY.env, steps=20)
     )
     assert "height (upright-start)" in cells and "| height |" in cells
 
