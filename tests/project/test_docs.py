@@ -28,6 +28,8 @@ from lonlib.analysis.claims_rescored import README_BEGIN as ROBUST_BEGIN
 from lonlib.analysis.claims_rescored import side_by_side_markdown, splice_side_by_side
 from lonlib.analysis.holding import README_BEGIN as HOLDING_BEGIN
 from lonlib.analysis.holding import holding_markdown, holding_summary, splice_holding
+from lonlib.analysis.reference_controllers import BEGIN as REFERENCE_CONTROLLERS_BEGIN
+from lonlib.analysis.reference_controllers import END as REFERENCE_CONTROLLERS_END
 from lonlib.analysis.summary import README_BEGIN as SUMMARY_BEGIN
 from lonlib.analysis.summary import splice_summary, summary_markdown
 from lonlib.calibration.report import DRIFT_HEADER, README_BEGIN, README_END
@@ -180,6 +182,7 @@ def test_every_generated_block_is_in_the_docs_once_and_the_drift_table_is_printe
             "<!-- lockstep-speed:begin (python -m benchmarks.readme) -->",
             "<!-- lockstep-speed:end -->",
         ),
+        (REFERENCE_CONTROLLERS_BEGIN, REFERENCE_CONTROLLERS_END),
     ]
     for begin, end in markers:
         holders = [page for page, body in text.items() if begin in body]
@@ -465,3 +468,20 @@ def test_the_fitness_scale_table_is_what_the_committed_data_give():
     page = (ROOT / "docs" / "results.md").read_text()
     assert splice(page, BEGIN, END, fitness_scale_markdown(ROOT)) == page
     assert splice(page, BEGIN, END, "another table") != page
+
+
+def test_the_reference_controllers_table_is_what_the_controllers_score(tmp_path):
+    from lonlib.analysis.reference_controllers import main, reference_controllers_markdown
+    from lonlib.util.readme_tables import splice
+
+    page = (ROOT / "docs" / "rollout.md").read_text()
+    table = reference_controllers_markdown()
+    assert splice(page, REFERENCE_CONTROLLERS_BEGIN, REFERENCE_CONTROLLERS_END, table) == page
+    assert "| 0.9415: every rod up at step 92" in table  # README's example: 0.9405 on two
+    (tmp_path / "docs").mkdir()  # the command writes the block into a project's page
+    (tmp_path / "docs" / "rollout.md").write_text(
+        f"head\n{REFERENCE_CONTROLLERS_BEGIN}\nold\n{REFERENCE_CONTROLLERS_END}\ntail\n"
+    )
+    assert main([str(tmp_path)]) == 0
+    written = (tmp_path / "docs" / "rollout.md").read_text()
+    assert table in written and written.startswith("head\n") and written.endswith("tail\n")
