@@ -296,6 +296,8 @@ def _verify(args: argparse.Namespace) -> None:
     root = experiment_folder(args.dir)
     if args.dry_run:
         return _dry_run_reader("verify", root)
+    if not (root / "manifest.json").exists() and (args.seal or (root / "seal.json").exists()):
+        return _verify_files(root, args.seal)
     report = verify_experiment(args.dir, recordings=not args.no_recordings)
     shown = report.findings if args.all else report.findings[: args.limit]
     for finding in shown:
@@ -317,7 +319,30 @@ def _verify(args: argparse.Namespace) -> None:
         failed = failed or bool(mismatches)
     if failed:
         raise SystemExit(1)
+    if args.seal:
+        from lonlib.analysis.verify import seal_experiment
+
+        seal_experiment(report)
+        print(f"sealed: {root / 'seal.json'} and each run's digests.json")
     return None
+
+
+def _verify_files(root: Path, seal: bool) -> None:
+    """``lonlib verify`` of a folder that is not an experiment (a study's summaries): its
+    files against its ``files`` seal, or (``--seal``) sealed as they are."""
+    from lonlib.storage.digests import check_files_seal, seal_files
+
+    if seal:
+        print(f"sealed {seal_files(root)} files: {root / 'seal.json'}")
+        return
+    check = check_files_seal(root)
+    for name, what in check.problems:
+        print(f"error: [digest] {name}: {what}")
+    for name, what in check.pending:
+        print(f"warning: [digest] {name}: {what}")
+    print("verify: OK" if check.ok else f"verify: FAILED ({len(check.problems)} errors)")
+    if not check.ok:
+        raise SystemExit(1)
 
 
 def _thin(args: argparse.Namespace) -> None:
@@ -550,6 +575,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also replay every accepted optimum through gymnasium.make (float64 "
         "observations, lonlib.storage.load_policy) and require its stored fitness",
+    )
+    verify.add_argument(
+        "--seal",
+        action="store_true",
+        help="after a verification that holds, seal the folder as it is (seal.json, each run's "
+        "digests.json): for a folder written before digests; a folder that is not an "
+        "experiment (a study's summaries) gets each kept file's digest",
     )
     verify.set_defaults(func=_verify)
 
