@@ -128,6 +128,11 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     (configuration, executor, slots, device, lockstep batch, output folder, a stored
     experiment's configuration), nothing computed, created or written."""
     from lonlib.ddpg import check_device
+    from lonlib.experiment.admission import (
+        check_memory,
+        concurrent_searches,
+        search_memory_bytes,
+    )
     from lonlib.experiment.executors import resolve_executor, session_executor
     from lonlib.experiment.lockstep import check_drain, check_lockstep
     from lonlib.storage.manifest import manifest_path, updated_manifest
@@ -143,6 +148,9 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
     check_drain(kind, None if args.drain_after is None else args.drain_after * 60)
+    sized = dataclasses.replace(config, slots=slots)
+    searches = concurrent_searches(sized, kind, args.workers)
+    check_memory(sized, searches)
     state = _check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
         manifest = updated_manifest(
@@ -165,6 +173,8 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
         where += f", {slots} slots on {config.ddpg.device}"
     if args.drain_after is not None:
         where += f", draining after {args.drain_after:g} minutes"
+    need = searches * search_memory_bytes(config.env, config.ddpg) / 2**30
+    where += f"; about {need:.2g} GiB for {searches} search(es) at once"
     print(
         f"dry run: {config.name}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
         f"{config.runs} runs per p; executor {where}; output {out} ({state}). "
@@ -699,7 +709,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         check_arguments(args)
         args.func(args)
-    except (ValueError, CorruptDataError, OSError) as error:
+    except (ValueError, CorruptDataError, OSError, MemoryError) as error:
         print(f"lonlib: error: {_error_message(error)}", file=sys.stderr)
         raise SystemExit(2) from None
 
