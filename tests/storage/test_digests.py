@@ -37,7 +37,7 @@ from lonlib.storage.thin import thin_histories
 from lonlib.storage.trials import load_run_state
 from tests.conftest import write_tiny_yaml
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = [ROOT / "data" / "reference", ROOT / "data" / "one-cart"]
 P, SEARCHES = 1e-3, 3
 
