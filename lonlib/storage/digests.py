@@ -358,6 +358,12 @@ def check_experiment_seal(
     root = Path(root)
     check = SealCheck(root, is_sealed(root))
     if not check.sealed:
+        chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
+        if chained:  # written with digests: a lost root is not an old experiment
+            check.sealed = True
+            check.problems.append(
+                (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
+            )
         return check
     try:
         seal = _read(root / SEAL_NAME)
@@ -481,9 +487,7 @@ def _check_recordings(
             )
         )
     for name in sorted(present - set(listed)):
-        check.problems.append(
-            (f"{RECORDINGS_FOLDER}/{name}", "a recording the index does not list")
-        )
+        check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "not in the recordings index"))
     for name in sorted(present & set(listed)):
         if file_digest(folder / name) != listed[name].get("sha256"):
             check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "differs from its seal"))

@@ -324,3 +324,10 @@ def test_the_committed_study_folders_are_sealed_and_match():
     for folder in STUDIES:
         check = check_files_seal(folder)
         assert check.ok, (folder, check.problems)
+
+
+def test_a_deleted_root_seal_of_a_sealed_experiment_is_named_not_unsealed(small, copy):
+    (copy / SEAL_NAME).unlink()
+    assert any("seal.json: missing, while 2 run(s)" in e for e in findings(copy))
+    with pytest.raises(TamperedDataError, match="seal.json"):
+        load_experiment(copy)
