@@ -124,7 +124,7 @@ class VerifyReport:
                 f"({RESULT_PATH_VERSION}): mismatches are reported as warnings"
             )
         if not self.sealed:
-            lines.append(f"unsealed: `lonlib verify --seal {self.folder}` seals it if it verifies")
+            lines.append(f"unsealed: `lonlib verify {self.folder} --seal` seals it if it verifies")
         for (severity, check), count in sorted(self.counts().items()):
             lines.append(f"  {severity}s [{check}]: {count}")
         lines.append("verify: OK" if self.ok else f"verify: FAILED ({len(self.errors)} errors)")

@@ -23,9 +23,10 @@ alike) no longer matches the root.
 (the run's commit point), the run's ``digests.json``, and the root at the session's open and
 close. A SIGKILL between two of them leaves a folder that reads as *pending*, never as
 tampered: files of a trial the table lacks are leftovers the next run overwrites; a row the
-run's digests lack is a trial written but not sealed (resuming redoes it: the table's sealed
-rows are the run's state); a run chain longer than the root's count is sealed in the run and
-recorded in the root at the next session. Anything else that differs is tampered data.
+run's digests lack is a trial written but not sealed, which the next process that takes the
+run seals as it is (:func:`seal_pending_trials`: the trial is kept, not redone); a run chain
+longer than the root's count is sealed in the run and recorded in the root at the next
+session. Anything else that differs is tampered data.
 
 A folder that is not an experiment (a study's summaries) gets a ``files`` seal: each file's
 digest (:func:`seal_files`, :func:`check_files_seal`).
@@ -438,7 +439,7 @@ def _check_run(
             (
                 f"{key}/trials.parquet",
                 f"{len(rows) - len(entries)} trial(s) written but not sealed (an interrupted "
-                "write): resuming the run redoes them",
+                "write): the next process that takes the run seals them",
             )
         )
     if len(entries) > count:
@@ -521,7 +522,7 @@ def check_readable(root: Path, manifest: Mapping[str, Any], verb: str) -> SealCh
     if not check.sealed:
         warnings.warn(
             f"{root}: unsealed (written before digests): `lonlib {verb}` cannot tell whether it "
-            f"changed since it was written; `lonlib verify --seal {root}` seals it after a "
+            f"changed since it was written; `lonlib verify {root} --seal` seals it after a "
             "full replay",
             UnsealedDataWarning,
             stacklevel=2,
@@ -608,13 +609,27 @@ def check_files_seal(folder: Path) -> SealCheck:
     return check
 
 
-def sealed_trial_count(run_folder: Path, root: Path) -> int | None:
-    """The trials sealed in a run's ``digests.json`` (None in an unsealed experiment): on
-    resume, the run's state is its table's first that many rows."""
-    if not is_sealed(root):
-        return None
-    path = Path(run_folder) / RUN_DIGESTS
-    return len(_read(path)["trials"]) if path.exists() else 0
+def seal_pending_trials(run_folder: Path, root: Path) -> int:
+    """Seal a run's trials written but not sealed (a kill between the table and its
+    digests, or a failed digests write): their rows and their files as they are. Called by
+    the process that takes the run (holding its lock) after the folder's seal was checked;
+    nothing in an unsealed experiment. Returns the number of trials sealed."""
+    root, run_folder = Path(root), Path(run_folder)
+    table = run_folder / "trials.parquet"
+    if not is_sealed(root) or not table.exists():
+        return 0
+    path = run_folder / RUN_DIGESTS
+    entries = _read(path)["trials"] if path.exists() else []
+    rows = table_row_digests(table.read_bytes())
+    pending = len(rows) - len(entries)
+    if pending <= 0:
+        return 0
+    for index in range(len(entries), len(rows)):
+        names = [n.format(index) for n in RUN_FILES if (run_folder / n.format(index)).is_file()]
+        files = {n: file_digest(run_folder / n) for n in names}
+        entries.append({"index": index, "row": rows[index], "files": files})
+    _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(run_folder, root), entries)})
+    return pending
 
 
 __all__ = [
@@ -636,6 +651,6 @@ __all__ = [
     "row_digests",
     "seal_files",
     "seal_runs",
-    "sealed_trial_count",
+    "seal_pending_trials",
     "write_root",
 ]

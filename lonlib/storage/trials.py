@@ -23,7 +23,7 @@ from lonlib.storage.atomic import (
     atomic_write,
     parquet_bytes,
 )
-from lonlib.storage.digests import append_trial, check_readable, sealed_trial_count
+from lonlib.storage.digests import append_trial, check_readable
 from lonlib.storage.layout import (
     history_path,
     optimum_path,
@@ -137,11 +137,6 @@ def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -
     if not path.exists():
         return None
     table = read_trials(path)
-    sealed = sealed_trial_count(run_dir(root, p, run), Path(root))
-    if sealed is not None and sealed < len(table):
-        table = table.iloc[:sealed]  # rows written but not sealed: an interrupted write, redone
-    if table.empty:
-        return None
     state = replay_trials(table, config)
     if state.incumbent_index >= 0:
         stored = read_optimum(optimum_path(root, p, run, state.incumbent_index))

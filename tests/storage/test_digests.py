@@ -171,7 +171,7 @@ def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, c
     (copy / SEAL_NAME).unlink()
     for path in copy.glob(f"p=*/run_*/{RUN_DIGESTS}"):
         path.unlink()
-    with pytest.warns(UnsealedDataWarning, match="verify --seal"):
+    with pytest.warns(UnsealedDataWarning, match="unsealed .* --seal"):
         load_experiment(copy)
     report = verify_experiment(copy, recordings=False)
     assert report.ok and not report.sealed
