@@ -128,6 +128,11 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     (configuration, executor, slots, device, lockstep batch, output folder, a stored
     experiment's configuration), nothing computed, created or written."""
     from lonlib.ddpg import check_device
+    from lonlib.experiment.admission import (
+        check_memory,
+        concurrent_searches,
+        search_memory_bytes,
+    )
     from lonlib.experiment.executors import resolve_executor, session_executor
     from lonlib.experiment.lockstep import check_drain, check_lockstep
     from lonlib.storage.manifest import manifest_path, updated_manifest
@@ -143,6 +148,9 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
     check_drain(kind, None if args.drain_after is None else args.drain_after * 60)
+    sized = dataclasses.replace(config, slots=slots)
+    searches = concurrent_searches(sized, kind, args.workers)
+    check_memory(sized, searches)
     state = _check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
         manifest = updated_manifest(
@@ -165,6 +173,8 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
         where += f", {slots} slots on {config.ddpg.device}"
     if args.drain_after is not None:
         where += f", draining after {args.drain_after:g} minutes"
+    need = searches * search_memory_bytes(config.env, config.ddpg) / 2**30
+    where += f"; about {need:.2g} GiB for {searches} search(es) at once"
     print(
         f"dry run: {config.name}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
         f"{config.runs} runs per p; executor {where}; output {out} ({state}). "
@@ -296,6 +306,8 @@ def _verify(args: argparse.Namespace) -> None:
     root = experiment_folder(args.dir)
     if args.dry_run:
         return _dry_run_reader("verify", root)
+    if not (root / "manifest.json").exists() and (args.seal or (root / "seal.json").exists()):
+        return _verify_files(root, args.seal)
     report = verify_experiment(args.dir, recordings=not args.no_recordings)
     shown = report.findings if args.all else report.findings[: args.limit]
     for finding in shown:
@@ -317,7 +329,30 @@ def _verify(args: argparse.Namespace) -> None:
         failed = failed or bool(mismatches)
     if failed:
         raise SystemExit(1)
+    if args.seal:
+        from lonlib.analysis.verify import seal_experiment
+
+        seal_experiment(report)
+        print(f"sealed: {root / 'seal.json'} and each run's digests.json")
     return None
+
+
+def _verify_files(root: Path, seal: bool) -> None:
+    """``lonlib verify`` of a folder that is not an experiment (a study's summaries): its
+    files against its ``files`` seal, or (``--seal``) sealed as they are."""
+    from lonlib.storage.digests import check_files_seal, seal_files
+
+    if seal:
+        print(f"sealed {seal_files(root)} files: {root / 'seal.json'}")
+        return
+    check = check_files_seal(root)
+    for name, what in check.problems:
+        print(f"error: [digest] {name}: {what}")
+    for name, what in check.pending:
+        print(f"warning: [digest] {name}: {what}")
+    print("verify: OK" if check.ok else f"verify: FAILED ({len(check.problems)} errors)")
+    if not check.ok:
+        raise SystemExit(1)
 
 
 def _thin(args: argparse.Namespace) -> None:
@@ -551,6 +586,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="also replay every accepted optimum through gymnasium.make (float64 "
         "observations, lonlib.storage.load_policy) and require its stored fitness",
     )
+    verify.add_argument(
+        "--seal",
+        action="store_true",
+        help="after a verification that holds, seal the folder as it is (seal.json, each run's "
+        "digests.json): for a folder written before digests; a folder that is not an "
+        "experiment (a study's summaries) gets each kept file's digest",
+    )
     verify.set_defaults(func=_verify)
 
     thin = sub.add_parser(
@@ -667,7 +709,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         check_arguments(args)
         args.func(args)
-    except (ValueError, CorruptDataError, OSError) as error:
+    except (ValueError, CorruptDataError, OSError, MemoryError) as error:
         print(f"lonlib: error: {_error_message(error)}", file=sys.stderr)
         raise SystemExit(2) from None
 

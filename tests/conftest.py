@@ -96,3 +96,21 @@ def device_mode(request):
     else:
         with cpu_as_device():
             yield request.param
+
+
+def reseal(folder: Path) -> Path:
+    """Seal an experiment folder a test crafted by hand (runs truncated, a version stamped,
+    a recording planted) as if lonlib had written it so: the old seal removed, the runs,
+    the recordings and the figures sealed as they are now (:mod:`lonlib.storage.digests`)."""
+    from lonlib.analysis.recordings import recordings_index
+    from lonlib.storage.digests import RUN_DIGESTS, SEAL_NAME, reseal_outputs, seal_runs
+    from lonlib.storage.layout import read_manifest
+
+    folder = Path(folder)
+    (folder / SEAL_NAME).unlink(missing_ok=True)
+    for path in folder.glob(f"p=*/run_*/{RUN_DIGESTS}"):
+        path.unlink()
+    seal_runs(folder, read_manifest(folder))
+    figures = sorted(p for p in (folder / "figures").glob("*") if p.is_file())
+    reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
+    return folder

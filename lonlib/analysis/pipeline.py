@@ -50,12 +50,13 @@ from lonlib.analysis.plots import (
     save_html,
     sensitivity,
 )
-from lonlib.analysis.recordings import record, recording_name
+from lonlib.analysis.recordings import record, recording_name, recordings_index
 from lonlib.analysis.summary import experiment_summary
 from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
 from lonlib.lon.metrics import lon_metrics
+from lonlib.storage.digests import reseal_outputs
 from lonlib.storage.layout import optimum_path, stored_config
 from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
@@ -64,10 +65,13 @@ from lonlib.util.labels import p_label
 from lonlib.util.validation import check_range
 
 
-def load_experiment(folder: str | Path) -> tuple[ExperimentConfig, pd.DataFrame]:
-    """The stored configuration and all trials of an experiment folder."""
+def load_experiment(
+    folder: str | Path, check_seal: bool = True
+) -> tuple[ExperimentConfig, pd.DataFrame]:
+    """The stored configuration and all trials of an experiment folder (refused when they
+    no longer match the folder's seal, unless ``check_seal`` is False: ``lonlib verify``)."""
     folder = Path(folder)
-    trials = read_finished_trials(folder)
+    trials = read_finished_trials(folder, check_seal=check_seal)
     return stored_config(folder), trials
 
 
@@ -203,6 +207,7 @@ def analyse(
         save("sensitivity", sensitivity(result.metrics))
     if conditioning:
         _conditioning(experiment, result, save, out, bins)
+    reseal_outputs(folder, figures=result.files)
     return result
 
 
@@ -375,4 +380,5 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
             },
         )
         paths.append(path)
+    reseal_outputs(folder, recordings=recordings_index(folder))
     return paths

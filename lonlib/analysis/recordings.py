@@ -280,3 +280,19 @@ def recording_properties(path: str | Path) -> dict[str, float | int | str]:
             if not name.startswith("rerun.")
         }
     return {}
+
+
+def recordings_index(folder: str | Path) -> dict[str, dict[str, float | int | None]]:
+    """Every recording of an experiment folder (``recordings/*.rrd``) with the trial it shows
+    (``p``, ``run``, ``index``) and that trial's stored fitness, read from its ``optimum``
+    property: the index the folder's seal keeps (:mod:`lonlib.storage.digests`)."""
+    index = {}
+    for path in sorted((Path(folder) / "recordings").glob("*.rrd")):
+        props = recording_properties(path)
+        index[path.name] = {
+            "p": props.get("p"),
+            "run": props.get("run"),
+            "index": props.get("index"),
+            "fitness": props.get("stored_fitness", props.get("fitness")),
+        }
+    return index

@@ -19,7 +19,11 @@ checks, exactly (bit for bit, no tolerance):
   comes after the run's end (T consecutive failures or ``max_local_searches``), so a run
   sampled on under other settings is caught;
 * ``recording``: every ``recordings/*.rrd`` names a stored trial (p, run, index) in its
-  ``optimum`` property, carries that trial's fitness, and its Actor replays to it.
+  ``optimum`` property, carries that trial's fitness, and its Actor replays to it;
+* ``digest``: every file matches the folder's seal (:mod:`lonlib.storage.digests`: each
+  run's rows and files, chained; the recordings index; the figures), each that does not is
+  named; an unsealed folder is a warning (``lonlib verify --seal`` seals it once it
+  verifies).
 
 Severity: on data of the current result-path version (:mod:`lonlib.storage.result_path`) every
 mismatch is an error; on data sampled under another (or an unrecorded) version they are
@@ -39,16 +43,25 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from lonlib.analysis.recordings import recordings_index
 from lonlib.search.algorithm import RunState, Trial, random_parameters, search_start
 from lonlib.storage.atomic import CorruptDataError
-from lonlib.storage.layout import optimum_path, read_manifest
+from lonlib.storage.digests import (
+    FIGURES_FOLDER,
+    SealCheck,
+    check_experiment_seal,
+    reseal_outputs,
+    seal_runs,
+)
+from lonlib.storage.layout import MANIFEST_LOCK, optimum_path, read_manifest
+from lonlib.storage.lock import exclusive_lock
 from lonlib.storage.result_path import KNOWN_RESULT_PATH_VERSIONS, RESULT_PATH_VERSION
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
 from lonlib.task.policy import actor_spec
 from lonlib.task.rollout import score_actors
 
-__all__ = ["Finding", "VerifyReport", "verify_experiment"]
+__all__ = ["Finding", "VerifyReport", "seal_experiment", "seal_findings", "verify_experiment"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +90,7 @@ class VerifyReport:
     starts: int = 0  # trials whose start was rebuilt and scored
     recordings: int = 0  # recordings checked
     current_version: bool = True  # every session ran the current result-path version
+    sealed: bool = True  # the folder has a seal (lonlib.storage.digests)
     findings: list[Finding] = field(default_factory=list)
 
     @property
@@ -109,6 +123,8 @@ class VerifyReport:
                 f"sampled under another result-path version than this code's "
                 f"({RESULT_PATH_VERSION}): mismatches are reported as warnings"
             )
+        if not self.sealed:
+            lines.append(f"unsealed: `lonlib verify {self.folder} --seal` seals it if it verifies")
         for (severity, check), count in sorted(self.counts().items()):
             lines.append(f"  {severity}s [{check}]: {count}")
         lines.append("verify: OK" if self.ok else f"verify: FAILED ({len(self.errors)} errors)")
@@ -183,7 +199,7 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     from lonlib.analysis.pipeline import load_experiment
 
     folder = Path(folder)
-    config, trials = load_experiment(folder)
+    config, trials = load_experiment(folder, check_seal=False)  # differences are findings
     versions = session_versions(folder)
     current = bool(versions) and all(v == RESULT_PATH_VERSION for v in versions)
     unknown = sorted({str(v) for v in versions if v is not None} - set(KNOWN_RESULT_PATH_VERSIONS))
@@ -216,6 +232,9 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
             )
         )
     report.findings.extend(_provenance_findings(folder))
+    seal = check_experiment_seal(folder, read_manifest(folder), recordings=recordings)
+    report.sealed = seal.sealed
+    report.findings.extend(seal_findings(seal))
     # Algorithm 2's bookkeeping does not depend on the result path: always an error
     report.findings.extend(algorithm_findings(config, trials))
     thetas, rows = _stored_actors(folder, trials, config, report, mismatch)
@@ -232,6 +251,45 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     if recordings:
         _check_recordings(folder, trials, replayed, report, mismatch)
     return report
+
+
+def seal_findings(seal: SealCheck) -> list[Finding]:
+    """The ``digest`` check: each file that differs from the folder's seal (an error naming
+    it), each interrupted write the next run completes (a warning), an unsealed folder (a
+    warning)."""
+    if not seal.sealed:
+        return [
+            Finding(
+                "warning",
+                "digest",
+                None,
+                None,
+                None,
+                "unsealed (written before digests): nothing says whether a file changed since",
+            )
+        ]
+    return [
+        Finding("error", "digest", None, None, None, f"{name}: {what}")
+        for name, what in seal.problems
+    ] + [
+        Finding("warning", "digest", None, None, None, f"{name}: {what}")
+        for name, what in seal.pending
+    ]
+
+
+def seal_experiment(report: VerifyReport) -> None:
+    """Seal the experiment ``report`` verified (``lonlib verify --seal``): every run's trials
+    and files, the recordings index and the figures, as they are. ValueError when the
+    verification failed: a folder is sealed only after a full replay holds."""
+    if not report.ok:
+        raise ValueError(
+            f"{report.folder}: verify failed; a folder is sealed only when it verifies"
+        )
+    folder = report.folder
+    with exclusive_lock(folder / MANIFEST_LOCK, record_holder=False):
+        seal_runs(folder, read_manifest(folder))
+    figures = sorted(p for p in (folder / FIGURES_FOLDER).glob("*") if p.is_file())
+    reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
 
 
 def algorithm_findings(config, trials: pd.DataFrame, severity: str = "error") -> list[Finding]:

@@ -58,6 +58,7 @@ from lonlib.ddpg.slots import LocalSearchResult
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.search.algorithm import perturb_parameters
 from lonlib.storage.atomic import atomic_write, read_json, write_json
+from lonlib.storage.digests import reseal_files_if_sealed
 from lonlib.task.behaviour import LABELS
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.util.validation import check_choice, check_field_types, check_keys, check_range
@@ -539,6 +540,7 @@ class HoldTest:
         atomic_write(self.out / "searches.csv", rows.to_csv(index=False).encode())
         atomic_write(self.out / "summary.csv", summary.to_csv(index=False).encode())
         atomic_write(self.out / "summary.md", summary_markdown(summary, self.config).encode())
+        reseal_files_if_sealed(self.out)
         return summary
 
 

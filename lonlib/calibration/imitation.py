@@ -44,6 +44,7 @@ import torch
 from lonlib.config import PendulumConfig, Scoring
 from lonlib.config.pendulum import SENSORS_PER_CART
 from lonlib.storage.atomic import atomic_write, write_json
+from lonlib.storage.digests import reseal_files_if_sealed
 from lonlib.task.policy import actor_spec, forward_numpy
 from lonlib.task.rollout import (
     Policy,
@@ -267,6 +268,7 @@ def write_imitation(out: str | Path, result: ImitationResult, config: ImitationC
         raise RuntimeError("the stored Actor does not replay the fitness it was chosen by")
     path = out / "actor.json"
     write_json(path, record)
+    reseal_files_if_sealed(out)
     return path
 
 

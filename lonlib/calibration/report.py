@@ -31,6 +31,7 @@ from lonlib.calibration.summaries import (
 )
 from lonlib.config import CalibrationConfig
 from lonlib.storage.atomic import atomic_write
+from lonlib.storage.digests import reseal_files_if_sealed
 from lonlib.task.behaviour import LABELS
 from lonlib.util.figures import png_bytes, themed
 
@@ -402,6 +403,7 @@ def write_outputs(
     atomic_write(files[-1], markdown.encode())
     png = out / "calibration.png"
     atomic_write(png, png_bytes(figure))
+    reseal_files_if_sealed(out)
     return CalibrationResult(cells, searches, drift, figure, [*files, png])
 
 

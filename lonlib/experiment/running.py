@@ -29,6 +29,7 @@ from tqdm import tqdm
 from lonlib.config import ExperimentConfig
 from lonlib.ddpg.search_interface import ddpg_local_search
 from lonlib.ddpg.trainer import check_device
+from lonlib.experiment.admission import check_memory, concurrent_searches
 from lonlib.experiment.checkpoints import remove_inflight
 from lonlib.experiment.executors import execute_runs, resolve_executor, session_executor
 from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_drain, check_lockstep, draining
@@ -181,6 +182,7 @@ def run_experiment(
         config, workers, scheduler, max_attempts, executor, slots, checkpoint_seconds
     )
     check_drain(kind, drain_after_seconds)
+    check_memory(config, concurrent_searches(config, kind, workers))  # before any folder
     drain_at = None if drain_after_seconds is None else started + drain_after_seconds
     out = Path(out)
     check_output_folder(out)

@@ -135,6 +135,12 @@ def check_output_place(out: Path) -> None:
     parent of ``out`` is an existing folder and ``out`` is not a file (DataWriteError
     naming the cause otherwise)."""
     out = Path(out)
+    if out.is_symlink() and not out.exists():
+        raise DataWriteError(
+            errno.ENOENT,
+            f"cannot write {out}: it is a symbolic link to {os.readlink(out)}, which does not "
+            "exist; create that folder or give another --out",
+        )
     parent = out.parent
     if parent.exists() and not parent.is_dir():
         raise DataWriteError(

@@ -13,7 +13,8 @@ from typing import Any
 
 from lonlib.config import ExperimentConfig
 from lonlib.storage.atomic import remove_temporary_files, write_json
-from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, run_dir
+from lonlib.storage.digests import check_readable, is_sealed, refresh_root, write_root
+from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, read_manifest, run_dir
 from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.manifest import (
     manifest_path,
@@ -73,6 +74,9 @@ class SamplingSession:
         try:
             with exclusive_lock(out / MANIFEST_LOCK, record_holder=False):
                 remove_temporary_files(out, manifest_path(out).name)
+                new = not manifest_path(out).exists()
+                if not new:  # what is resumed must be what was sealed, before any compute
+                    check_readable(out, read_manifest(out), "run")
                 manifest = updated_manifest(config, out, provenance, allow_changes)
                 changed = bool(manifest["sessions"][-1].get("changed"))
                 _hold_sampling_lock(out, manifest, sampling, changed, held_by_another)
@@ -82,7 +86,17 @@ class SamplingSession:
                 tidy(todo)
                 recorded = bool(todo) or changed or not manifest_path(out).exists()
                 if recorded:  # a finished experiment stays untouched, unless its settings change
+                    # Sealed ahead of the manifest (a new experiment from its start; changed
+                    # settings accepted beside the old), then as written.
+                    sealed = new or is_sealed(out)
+                    if sealed:
+                        stored = manifest if new else read_manifest(out)
+                        write_root(out, stored, next_manifest=manifest)
                     write_json(manifest_path(out), manifest)
+                    if sealed:
+                        write_root(out, manifest)
+                else:  # an interrupted session's runs, sealed in their folders, in the root
+                    refresh_root(out, read_manifest(out))
                 sampling.share()
         except BaseException:
             sampling.release()
@@ -175,6 +189,8 @@ def _record_session_end(out: Path, session_id: str, seconds: float) -> None:
             try:
                 with exclusive_lock(out / MANIFEST_LOCK, wait=False, record_holder=False):
                     mark_session_ended(out, session_id, seconds)
+                    if is_sealed(out):  # the runs' chains as this session leaves them
+                        write_root(out, read_manifest(out))
                 return
             except LockHeld:
                 if time.monotonic() >= deadline:

@@ -10,7 +10,9 @@ changes; no stored fitness, optimum, label or recording depends on a history, so
 verify` replays a thinned folder as before. A thinned history is a summary: the dropped rows
 come back only by re-running the search (the result path repeats bit for bit). Thinning
 changes the folder's :func:`lonlib.storage.result_path.experiment_digest` (it hashes the
-histories): compare a re-run with a thinned folder after thinning the re-run too.
+histories): compare a re-run with a thinned folder after thinning the re-run too. In a sealed
+folder (:mod:`lonlib.storage.digests`) thinning first checks the seal, then reseals the
+histories it rewrote.
 """
 
 from __future__ import annotations
@@ -20,8 +22,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from lonlib.storage.atomic import atomic_write, parquet_bytes
-from lonlib.storage.layout import read_manifest
+from lonlib.storage.atomic import CorruptDataError, atomic_write, parquet_bytes
+from lonlib.storage.digests import check_readable, is_sealed, reseal_files
+from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
+from lonlib.storage.lock import exclusive_lock
 
 HISTORY_GLOB = "p=*/run_*/history_*.parquet"
 """Where an experiment folder keeps its training histories (:mod:`lonlib.storage.layout`)."""
@@ -69,8 +73,16 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
     (:func:`thinned_history`, each file written atomically); ``dry_run`` reports and
     writes nothing. Idempotent: a thinned history is left as it is."""
     root = Path(folder)
-    read_manifest(root)  # an experiment folder, or the error that says how to make one
+    manifest = read_manifest(root)  # an experiment folder, or the error that says how to make one
+    linked = [p for p in sorted(root.glob("p=*/run_*/*")) if p.is_symlink()]
+    if linked:
+        raise CorruptDataError(
+            f"{linked[0]}: a symbolic link in an experiment's run folder; thin rewrites files "
+            "in place and follows no link: copy the experiment instead of linking its files"
+        )
+    check_readable(root, manifest, "thin")  # before any file is rewritten
     files = sorted(root.glob(HISTORY_GLOB))
+    rewritten = []
     thinned = rows_before = rows_after = bytes_before = bytes_after = 0
     for path in files:
         history = pd.read_parquet(path)
@@ -90,6 +102,10 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
         thinned += 1
         if not dry_run:
             atomic_write(path, data)
+            rewritten.append(path)
+    if rewritten and is_sealed(root):
+        with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
+            reseal_files(root, read_manifest(root), rewritten)
     return ThinReport(len(files), thinned, rows_before, rows_after, bytes_before, bytes_after)
 
 

@@ -23,10 +23,12 @@ from lonlib.storage.atomic import (
     atomic_write,
     parquet_bytes,
 )
+from lonlib.storage.digests import append_trial, check_readable
 from lonlib.storage.layout import (
     history_path,
     optimum_path,
     read_manifest,
+    run_dir,
     trials_path,
 )
 
@@ -43,9 +45,11 @@ def save_step(
     accepted or not, so that every stored number replays), then the trials table (the
     commit point)."""
     last = trials[-1]
+    written: dict[str, bytes] = {}
     if optimum is not None and optimum.history:
         path = history_path(root, p, run, last.index)
-        atomic_write(path, parquet_bytes(pd.DataFrame(optimum.history)))
+        written[path.name] = parquet_bytes(pd.DataFrame(optimum.history))
+        atomic_write(path, written[path.name])
     if optimum is not None:
         buffer = io.BytesIO()
         np.savez_compressed(
@@ -54,8 +58,12 @@ def save_step(
             omega=optimum.omega.astype(np.float32),
             fitness=np.float64(optimum.fitness),
         )
-        atomic_write(optimum_path(root, p, run, last.index), buffer.getvalue())
-    atomic_write(trials_path(root, p, run), parquet_bytes(trials_frame(p, run, trials)))
+        path = optimum_path(root, p, run, last.index)
+        written[path.name] = buffer.getvalue()
+        atomic_write(path, written[path.name])
+    table = parquet_bytes(trials_frame(p, run, trials))
+    atomic_write(trials_path(root, p, run), table)
+    append_trial(run_dir(root, p, run), Path(root), table, written)  # after the commit point
 
 
 def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:
@@ -128,9 +136,13 @@ def load_run_state(root: Path, p: float, run: int, config: BasinHoppingConfig) -
     path = trials_path(root, p, run)
     if not path.exists():
         return None
-    state = replay_trials(read_trials(path), config)
+    table = read_trials(path)
+    state = replay_trials(table, config)
     if state.incumbent_index >= 0:
-        state.incumbent = read_optimum(optimum_path(root, p, run, state.incumbent_index))
+        stored = read_optimum(optimum_path(root, p, run, state.incumbent_index))
+        # f* from the table (its row is what the seal covers), not the file's second copy
+        fitness = float(table["fitness"].iloc[state.incumbent_index])
+        state.incumbent = LocalOptimum(fitness, stored.theta, stored.omega)
     return state
 
 
@@ -166,11 +178,15 @@ def read_experiment_trials(root: Path) -> pd.DataFrame:
     return table.sort_values(["p", "run", "index"], ignore_index=True)
 
 
-def read_finished_trials(root: Path) -> pd.DataFrame:
+def read_finished_trials(root: Path, check_seal: bool = True) -> pd.DataFrame:
     """:func:`read_experiment_trials` of a folder that must hold an experiment with at least
     one finished local search: MissingExperimentError (no manifest) or ValueError otherwise,
-    both naming the folder."""
-    read_manifest(root)
+    both naming the folder. With ``check_seal`` (every reader but ``lonlib verify``, which
+    reports what differs instead) data that no longer matches its seal is refused first
+    (:func:`lonlib.storage.digests.check_readable`)."""
+    manifest = read_manifest(root)
+    if check_seal:
+        check_readable(Path(root), manifest, "analyse")
     trials = read_experiment_trials(root)
     if trials.empty:
         raise ValueError(f"{root} holds no finished local search yet")

@@ -12,6 +12,7 @@ import pytest
 from lonlib.analysis.verify import verify_experiment
 from lonlib.cli import main as cli_main
 from lonlib.storage.layout import optimum_path, trials_path
+from tests.conftest import reseal
 
 
 def test_a_fresh_experiment_replays_every_stored_number(tiny_experiment, capsys):
@@ -35,6 +36,7 @@ def test_a_run_of_the_committed_reference_replays_every_stored_number(tmp_path):
     back exactly from the stored Actors, under the current result-path version."""
     copy = tmp_path / "reference"
     shutil.copytree(REFERENCE / REFERENCE_RUN, copy / REFERENCE_RUN)
+    (copy / REFERENCE_RUN / "digests.json").unlink()  # a partial copy: unsealed
     shutil.copy(REFERENCE / "manifest.json", copy / "manifest.json")
     (copy / "recordings").mkdir()
     for recording in (REFERENCE / "recordings").glob("*_p=0.0001_run=7_*.rrd"):
@@ -99,6 +101,7 @@ def shift_fitness_and_stamp(folder, trials, version, sessions=slice(None)):
     for session in data["sessions"][sessions]:
         session["result_path_version"] = version
     manifest.write_text(json.dumps(data))
+    reseal(folder)  # a folder written so, not a changed one: the replay checks are tested
 
 
 def test_data_of_another_result_path_version_gives_warnings_not_errors(damaged):
@@ -253,6 +256,7 @@ def test_a_recording_of_another_episode_is_an_error(damaged):
         theta = read_optimum(optimum_path(folder, row.p, int(row.run), int(row["index"]))).theta
         keys = {"p": float(as_row.p), "run": int(as_row.run), "index": int(as_row["index"])}
         record(theta, config.env, recordings / name, scoring=config.ddpg.scoring, properties=keys)
+        reseal(folder)  # as `lonlib record` reseals: the replay of the recording is tested
 
     recorded(a, a, "right.rrd")
     report = verify_experiment(folder)

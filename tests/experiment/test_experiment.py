@@ -18,7 +18,7 @@ from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.layout import history_path, optimum_path, trials_path
 from lonlib.storage.trials import read_optimum, read_trials
 from lonlib.task.behaviour import LABELS, describe, descriptors_of
-from tests.conftest import write_tiny_yaml
+from tests.conftest import reseal, write_tiny_yaml
 
 COMPARED = [
     *("p", "run", "index", "parent", "fitness", "accepted", "env_steps"),
@@ -257,7 +257,7 @@ def _truncated_copy(out, tmp_path, keep, longer=None):
         table = read_trials(path)
         key = (float(table["p"].iloc[0]), int(table["run"].iloc[0]))
         table.iloc[: (longer or {}).get(key, keep)].to_parquet(path)
-    return copy
+    return reseal(copy)
 
 
 def _reject(folder, p, run, indices):
@@ -266,6 +266,7 @@ def _reject(folder, p, run, indices):
     table = read_trials(path)
     table.loc[table["index"].isin(indices), "accepted"] = False
     table.to_parquet(path)
+    reseal(folder)
 
 
 def test_a_lowered_local_search_budget_ends_the_runs_that_reach_it(reference, tmp_path, capsys):

@@ -3,6 +3,7 @@ last row stay, every other stored file is untouched, and the folder still verifi
 
 import io
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -13,6 +14,7 @@ from lonlib.cli import main
 from lonlib.storage import thin_histories
 from lonlib.storage.atomic import MissingExperimentError
 from lonlib.storage.thin import HISTORY_GLOB, thinned_history
+from tests.conftest import reseal
 
 
 def test_a_thinned_history_keeps_the_judged_rows_and_the_last_in_order():
@@ -47,6 +49,7 @@ def test_thinning_changes_only_the_histories_and_the_folder_still_verifies(
         history = pd.read_parquet(path)
         history.loc[history.index[:-1:2], "greedy_fitness"] = np.nan
         history.to_parquet(path, index=False)
+    reseal(root)  # as a search with judge_every > 0 stores it
     before = _files(root)
     histories = {p.relative_to(root) for p in root.glob(HISTORY_GLOB)}
     assert histories
@@ -57,7 +60,8 @@ def test_thinning_changes_only_the_histories_and_the_folder_still_verifies(
     assert report.rows_after < report.rows_before and report.bytes_after < report.bytes_before
     after = _files(root)
     assert after.keys() == before.keys()
-    assert {k for k in after if after[k] != before[k]} == histories
+    resealed = {Path("seal.json")} | {h.parent / "digests.json" for h in histories}
+    assert {k for k in after if after[k] != before[k]} == histories | resealed
     for name in histories:
         old = pd.read_parquet(io.BytesIO(before[name]))
         keep = old["greedy_fitness"].notna().to_numpy().copy()
@@ -96,6 +100,7 @@ def test_a_history_without_a_greedy_fitness_is_named(tiny_experiment, tmp_path):
     shutil.copytree(folder, root)
     path = sorted(root.glob(HISTORY_GLOB))[0]
     pd.read_parquet(path).drop(columns="greedy_fitness").to_parquet(path, index=False)
+    reseal(root)
     with pytest.raises(ValueError, match=f"{path.name}: a training history must have"):
         thin_histories(root)
 

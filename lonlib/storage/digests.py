@@ -1,0 +1,656 @@
+"""Content digests of what an experiment stores: the seal that makes a change visible.
+
+**What they protect against:** accidental edits, partial copies, a stale or mixed folder, a
+careless hand edit of a table or a file, a removed trial or recording. **What not:** someone
+who edits the data and recomputes the digests (SHA-256 in plain JSON, no key); against that,
+the sealed root (``seal.json``) of a committed experiment is in git, so any change to it shows
+in ``git status`` and in the history.
+
+Layout (beside :mod:`lonlib.storage.layout`)::
+
+    data/<experiment>/seal.json              the root: the configuration's digest, each run's
+                                             trial count and chain head, the recordings
+                                             index, the figures and their inputs' digest
+    p=<p>/run_<run>/digests.json             the run's chain: per trial, the digest of its
+                                             row of the trials table and of its files
+                                             (optimum, history)
+
+Each run's entries are chained (entry *i* hashes entry *i − 1*'s chain value), and the root
+keeps each run's count and head, so removing a run's last trials (rows, files and entries
+alike) no longer matches the root.
+
+**Write order** (each file by atomic rename): a trial's history and optimum, the trials table
+(the run's commit point), the run's ``digests.json``, and the root at the session's open and
+close. A SIGKILL between two of them leaves a folder that reads as *pending*, never as
+tampered: files of a trial the table lacks are leftovers the next run overwrites; a row the
+run's digests lack is a trial written but not sealed, which the next process that takes the
+run seals as it is (:func:`seal_pending_trials`: the trial is kept, not redone); a run chain
+longer than the root's count is sealed in the run and recorded in the root at the next
+session. Anything else that differs is tampered data.
+
+A folder that is not an experiment (a study's summaries) gets a ``files`` seal: each file's
+digest (:func:`seal_files`, :func:`check_files_seal`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import warnings
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from fnmatch import fnmatch
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from lonlib.storage.atomic import CorruptDataError, atomic_write
+
+SEAL_NAME = "seal.json"
+"""The root of an experiment's (or a folder's) seal."""
+RUN_DIGESTS = "digests.json"
+"""In each run's folder: the run's chain of trial digests."""
+SEAL_FORMAT = 1
+FIGURES_FOLDER = "figures"
+RECORDINGS_FOLDER = "recordings"
+RUN_FILES = ("optimum_{:04d}.npz", "history_{:04d}.parquet")
+"""A trial's files in its run's folder (:mod:`lonlib.storage.layout`), by trial index."""
+
+
+class TamperedDataError(CorruptDataError):
+    """Stored data no longer matches its seal: the message names the file."""
+
+
+class UnsealedDataWarning(UserWarning):
+    """An experiment written before digests (or never sealed) is read: nothing can say
+    whether it changed. ``lonlib verify --seal`` seals it after a full replay."""
+
+
+def bytes_digest(data: bytes) -> str:
+    """SHA-256 of ``data``, hex."""
+    return hashlib.sha256(data).hexdigest()
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's bytes, hex."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _canonical(value: Any) -> str:
+    """One stored value as text that tells every float bit and every type apart."""
+    if value is None or value is pd.NA:
+        return "n"
+    if isinstance(value, bool) or type(value).__name__ == "bool_":
+        return f"b:{bool(value)}"
+    if isinstance(value, int) or type(value).__name__.startswith(("int", "uint")):
+        return f"i:{int(value)}"
+    if isinstance(value, float) or type(value).__name__.startswith("float"):
+        value = float(value)
+        return "f:nan" if math.isnan(value) else f"f:{value.hex()}"
+    return f"s:{value}"
+
+
+def row_digests(table: pd.DataFrame) -> list[str]:
+    """The digest of each row of a trials table: its columns' names and values (every bit)."""
+    columns = list(table.columns)
+    return [
+        bytes_digest(
+            json.dumps([[c, _canonical(v)] for c, v in zip(columns, row, strict=True)]).encode()
+        )
+        for row in table.itertuples(index=False, name=None)
+    ]
+
+
+def table_row_digests(table_bytes: bytes) -> list[str]:
+    """:func:`row_digests` of a trials table's parquet bytes, read as every reader reads it."""
+    return row_digests(pd.read_parquet(io.BytesIO(table_bytes)))
+
+
+def _run_key(run_folder: Path, root: Path) -> str:
+    return run_folder.relative_to(root).as_posix()
+
+
+def _chain_start(key: str) -> str:
+    return bytes_digest(f"lonlib run {key}".encode())
+
+
+def _entry_text(entry: Mapping[str, Any]) -> str:
+    body = {k: entry[k] for k in ("index", "row", "files")}
+    return json.dumps(body, sort_keys=True, separators=(",", ":"))
+
+
+def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """``entries`` with their chain values computed from the run's start."""
+    previous, out = _chain_start(key), []
+    for entry in entries:
+        previous = bytes_digest((previous + _entry_text(entry)).encode())
+        out.append({**{k: entry[k] for k in ("index", "row", "files")}, "chain": previous})
+    return out
+
+
+def _write(path: Path, payload: Mapping[str, Any]) -> None:
+    atomic_write(path, (json.dumps(payload, indent=1, sort_keys=True) + "\n").encode())
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        payload = json.loads(path.read_bytes())
+    except (OSError, ValueError) as error:
+        raise TamperedDataError(f"{path}: cannot read the digests ({error})") from None
+    if not isinstance(payload, dict) or payload.get("format") != SEAL_FORMAT:
+        raise TamperedDataError(f"{path}: not a lonlib seal of format {SEAL_FORMAT}")
+    return payload
+
+
+def is_sealed(root: Path) -> bool:
+    """Whether the folder has a seal (:data:`SEAL_NAME`)."""
+    return (Path(root) / SEAL_NAME).is_file()
+
+
+def config_digest(manifest: Mapping[str, Any]) -> str:
+    """The digest of a manifest's configuration (its sessions may grow; its settings not)."""
+    return bytes_digest(json.dumps(manifest["config"], sort_keys=True).encode())
+
+
+# ----------------------------------------------------------------------------- writers
+
+
+def append_trial(
+    run_folder: Path, root: Path, table_bytes: bytes, files: Mapping[str, bytes]
+) -> None:
+    """Seal a run's newest trial (after its table, the commit point, is written): its row's
+    digest and those of ``files`` (name → the bytes just written), chained after the run's
+    sealed trials. Nothing happens in an unsealed experiment (sealing it is explicit)."""
+    if not is_sealed(root):
+        return
+    path = run_folder / RUN_DIGESTS
+    key = _run_key(run_folder, root)
+    entries = _read(path)["trials"] if path.exists() else []
+    rows = table_row_digests(table_bytes)
+    index = len(rows) - 1
+    entries = [e for e in entries if e["index"] < index]  # a redone trial replaces its entry
+    if len(entries) != index:
+        raise TamperedDataError(
+            f"{path}: seals {len(entries)} trials, the table before trial {index} holds {index}"
+        )
+    files_part = {name: bytes_digest(data) for name, data in sorted(files.items())}
+    entries.append({"index": index, "row": rows[index], "files": files_part})
+    _write(path, {"format": SEAL_FORMAT, "trials": _chained(key, entries)})
+
+
+def _run_folders(root: Path) -> list[Path]:
+    return sorted(p.parent for p in root.glob("p=*/run_*/trials.parquet"))
+
+
+def _sealed_runs(root: Path) -> dict[str, dict[str, Any]]:
+    """Each run's sealed count and chain head, from its ``digests.json``."""
+    runs = {}
+    for folder in sorted(p.parent for p in root.glob(f"p=*/run_*/{RUN_DIGESTS}")):
+        entries = _read(folder / RUN_DIGESTS)["trials"]
+        if entries:
+            runs[_run_key(folder, root)] = {"trials": len(entries), "head": entries[-1]["chain"]}
+    return runs
+
+
+def inputs_digest(seal: Mapping[str, Any]) -> str:
+    """The digest of what figures and tables are computed from: the configuration and every
+    run's sealed trials."""
+    body = {"config": seal.get("config"), "runs": seal.get("runs", {})}
+    return bytes_digest(json.dumps(body, sort_keys=True).encode())
+
+
+def write_root(
+    root: Path,
+    manifest: Mapping[str, Any],
+    *,
+    recordings: Mapping[str, Mapping[str, Any]] | None = None,
+    figures: Iterable[Path] | None = None,
+    next_manifest: Mapping[str, Any] | None = None,
+) -> None:
+    """Write the root seal from the runs' chains as they are now, the manifest's
+    configuration, and (given) the recordings index (file name → its trial's ``p``, ``run``,
+    ``index``, ``fitness``) or the figures just written (their digests and their inputs'
+    digest); what is not given is kept from the current root. ``next_manifest``: a manifest
+    about to replace ``manifest`` with changed settings (sealed ahead, so that a kill between
+    the two writes leaves either accepted). The caller holds the manifest lock and has
+    checked what it read."""
+    root = Path(root)
+    old = _read(root / SEAL_NAME) if is_sealed(root) else {}
+    seal: dict[str, Any] = {
+        "format": SEAL_FORMAT,
+        "kind": "experiment",
+        "config": config_digest(manifest),
+        "runs": _sealed_runs(root),
+    }
+    if next_manifest is not None and config_digest(next_manifest) != seal["config"]:
+        seal["config_next"] = config_digest(next_manifest)
+    if recordings is not None:
+        folder = root / RECORDINGS_FOLDER
+        seal["recordings"] = {
+            name: {**dict(info), "sha256": file_digest(folder / name)}
+            for name, info in sorted(recordings.items())
+        }
+    elif "recordings" in old:
+        seal["recordings"] = old["recordings"]
+    if figures is not None:
+        seal["figures"] = {
+            "inputs": inputs_digest(seal),
+            "files": {
+                Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in sorted(figures)
+            },
+        }
+    elif "figures" in old:
+        seal["figures"] = old["figures"]
+    _write(root / SEAL_NAME, seal)
+
+
+def refresh_root(root: Path, manifest: Mapping[str, Any]) -> None:
+    """Record in the root the runs' chains where it is behind them (a session that ended
+    before it updated the root); nothing when it is current or the folder unsealed."""
+    root = Path(root)
+    if is_sealed(root) and _read(root / SEAL_NAME).get("runs") != _sealed_runs(root):
+        write_root(root, manifest)
+
+
+def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
+    """Seal every run of ``root`` as it is now (``lonlib verify --seal``, after a full
+    replay; never silently): each run's chain from its table and files, then the root."""
+    root = Path(root)
+    for folder in _run_folders(root):
+        table_bytes = (folder / "trials.parquet").read_bytes()
+        entries = []
+        for index, row in enumerate(table_row_digests(table_bytes)):
+            names = [n.format(index) for n in RUN_FILES if (folder / n.format(index)).is_file()]
+            entries.append(
+                {"index": index, "row": row, "files": {n: file_digest(folder / n) for n in names}}
+            )
+        payload = {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
+        _write(folder / RUN_DIGESTS, payload)
+    write_root(root, manifest)
+
+
+def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path]) -> None:
+    """After a legitimate rewrite of sealed run files (``lonlib thin``): their new digests in
+    their runs' chains, then the root. The caller checked the seal before writing."""
+    root = Path(root)
+    by_run: dict[Path, list[Path]] = {}
+    for path in paths:
+        by_run.setdefault(Path(path).parent, []).append(Path(path))
+    for folder, changed in by_run.items():
+        digests = folder / RUN_DIGESTS
+        if not digests.exists():
+            continue
+        entries = _read(digests)["trials"]
+        names = {p.name: file_digest(p) for p in changed}
+        for entry in entries:
+            entry["files"] = {n: names.get(n, d) for n, d in entry["files"].items()}
+        _write(
+            digests, {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
+        )
+    write_root(root, manifest)
+
+
+def reseal_outputs(
+    root: Path,
+    *,
+    figures: Iterable[Path] | None = None,
+    recordings: Mapping[str, Mapping[str, Any]] | None = None,
+) -> bool:
+    """After ``lonlib analyse`` (``figures``: the files it wrote; its HTML pages, kept out of
+    git, are left out) or ``lonlib record`` (``recordings``: the index of every recording
+    in the folder): their digests in the root seal, under the manifest lock. Nothing in an
+    unsealed folder (returns False)."""
+    from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
+    from lonlib.storage.lock import exclusive_lock
+
+    root = Path(root)
+    if not is_sealed(root):
+        return False
+    kept = None if figures is None else [Path(f) for f in figures if Path(f).suffix != ".html"]
+    with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
+        write_root(root, read_manifest(root), recordings=recordings, figures=kept)
+    return True
+
+
+# ----------------------------------------------------------------------------- checks
+
+
+@dataclass
+class SealCheck:
+    """What :func:`check_experiment_seal` (or :func:`check_files_seal`) found."""
+
+    folder: Path
+    sealed: bool
+    problems: list[tuple[str, str]] = field(default_factory=list)
+    """(file, what differs): tampered data (errors)."""
+    pending: list[tuple[str, str]] = field(default_factory=list)
+    """(file, what): an interrupted write's leftovers, which the next run completes."""
+    sealed_trials: dict[str, int] = field(default_factory=dict)
+    """Per run (``p=<p>/run_<run>``): the trials sealed (the run's state on resume)."""
+
+    @property
+    def ok(self) -> bool:
+        """No tampered data (pending writes allowed)."""
+        return not self.problems
+
+    def raise_if_tampered(self) -> None:
+        """TamperedDataError with one line naming the first file that differs."""
+        if self.problems:
+            name, what = self.problems[0]
+            more = f" (and {len(self.problems) - 1} more)" if len(self.problems) > 1 else ""
+            raise TamperedDataError(
+                f"{self.folder / name}: {what}{more}; the data no longer matches its seal: "
+                f"`lonlib verify {self.folder}` lists every difference"
+            )
+
+
+def check_experiment_seal(
+    root: Path, manifest: Mapping[str, Any], *, figures: bool = True, recordings: bool = True
+) -> SealCheck:
+    """Compare an experiment folder with its seal: configuration, each run's trials (rows,
+    files, chain, count against the root), and (asked) the recordings and figures."""
+    root = Path(root)
+    check = SealCheck(root, is_sealed(root))
+    if not check.sealed:
+        chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
+        if chained:  # written with digests: a lost root is not an old experiment
+            check.sealed = True
+            check.problems.append(
+                (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
+            )
+        return check
+    try:
+        seal = _read(root / SEAL_NAME)
+    except TamperedDataError as error:
+        check.problems.append((SEAL_NAME, str(error).split(": ", 1)[-1]))
+        return check
+    if seal.get("kind") != "experiment":
+        check.problems.append((SEAL_NAME, "seals a folder of files, not an experiment"))
+        return check
+    if config_digest(manifest) not in (seal.get("config"), seal.get("config_next")):
+        check.problems.append(("manifest.json", "its configuration differs from the sealed one"))
+    sealed_runs = seal.get("runs", {})
+    folders = {_run_key(f, root): f for f in _run_folders(root)}
+    for key in sorted(set(sealed_runs) - set(folders)):
+        check.problems.append((f"{key}/trials.parquet", "a sealed run's trials table is missing"))
+    for key, folder in folders.items():
+        _check_run(check, root, key, folder, sealed_runs.get(key))
+    if recordings:
+        _check_recordings(check, root, seal.get("recordings"))
+    if figures:
+        _check_figures(check, root, seal)
+    return check
+
+
+def _check_run(
+    check: SealCheck, root: Path, key: str, folder: Path, sealed: Mapping[str, Any] | None
+) -> None:
+    digests = folder / RUN_DIGESTS
+    try:
+        entries = _read(digests)["trials"] if digests.exists() else []
+    except TamperedDataError as error:
+        check.problems.append((f"{key}/{RUN_DIGESTS}", str(error).split(": ", 1)[-1]))
+        return
+    if [e.get("chain") for e in entries] != [e["chain"] for e in _chained(key, entries)]:
+        check.problems.append((f"{key}/{RUN_DIGESTS}", "its chain of trial digests is broken"))
+        return
+    count = 0 if sealed is None else int(sealed["trials"])
+    if sealed is not None:
+        head = sealed["head"]
+        if len(entries) < count or entries[count - 1]["chain"] != head:
+            check.problems.append(
+                (
+                    f"{key}/trials.parquet",
+                    f"the seal holds {count} trials of this run and they are not all here "
+                    f"({len(entries)} sealed in the run): trials were removed or rewritten",
+                )
+            )
+            return
+    try:
+        rows = table_row_digests((folder / "trials.parquet").read_bytes())
+    except Exception as error:  # pyarrow raises several types for a damaged file
+        check.problems.append((f"{key}/trials.parquet", f"cannot be read ({error})"))
+        return
+    if len(rows) < len(entries):
+        check.problems.append(
+            (f"{key}/trials.parquet", f"holds {len(rows)} trials, {len(entries)} are sealed")
+        )
+    for entry, row in zip(entries, rows, strict=False):
+        if entry["row"] != row:
+            check.problems.append(
+                (f"{key}/trials.parquet", f"trial {entry['index']}'s row differs from its seal")
+            )
+    for entry in entries:
+        for name, digest in entry["files"].items():
+            path = folder / name
+            if not path.is_file():
+                check.problems.append((f"{key}/{name}", "a sealed file is missing"))
+            elif file_digest(path) != digest:
+                check.problems.append((f"{key}/{name}", "differs from its seal"))
+    if len(rows) > len(entries):
+        check.pending.append(
+            (
+                f"{key}/trials.parquet",
+                f"{len(rows) - len(entries)} trial(s) written but not sealed (an interrupted "
+                "write): the next process that takes the run seals them",
+            )
+        )
+    if len(entries) > count:
+        check.pending.append(
+            (
+                f"{key}/{RUN_DIGESTS}",
+                f"{len(entries) - count} trial(s) sealed in the run and not yet in the root "
+                f"({SEAL_NAME}): a session in progress or interrupted; the next session or "
+                "`lonlib verify --seal` records them",
+            )
+        )
+    check.sealed_trials[key] = min(len(entries), len(rows))
+    sealed_names = {n for e in entries for n in e["files"]}
+    for path in sorted(folder.glob("*_[0-9][0-9][0-9][0-9].*")):
+        index = int(path.stem.rsplit("_", 1)[1])
+        if path.name in sealed_names:
+            continue
+        if index >= len(entries):
+            check.pending.append((f"{key}/{path.name}", "a leftover of an unsealed trial"))
+        else:
+            check.problems.append((f"{key}/{path.name}", "a file no seal lists"))
+
+
+def _check_recordings(
+    check: SealCheck, root: Path, index: Mapping[str, Mapping[str, Any]] | None
+) -> None:
+    folder = root / RECORDINGS_FOLDER
+    present = {p.name for p in folder.glob("*.rrd")} if folder.is_dir() else set()
+    listed = dict(index or {})
+    if index is None and present:
+        check.problems.append(
+            (RECORDINGS_FOLDER, f"{len(present)} recordings and no recordings index in the seal")
+        )
+        return
+    for name in sorted(set(listed) - present):
+        info = listed[name]
+        renamed = [
+            n for n in present - set(listed) if file_digest(folder / n) == info.get("sha256")
+        ]
+        what = f"renamed to {renamed[0]}" if renamed else "missing"
+        check.problems.append(
+            (
+                f"{RECORDINGS_FOLDER}/{name}",
+                f"the recording of p={info.get('p')}, run {info.get('run')}, trial "
+                f"{info.get('index')} (f = {info.get('fitness')}) is {what}",
+            )
+        )
+    for name in sorted(present - set(listed)):
+        check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "not in the recordings index"))
+    for name in sorted(present & set(listed)):
+        if file_digest(folder / name) != listed[name].get("sha256"):
+            check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "differs from its seal"))
+
+
+def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> None:
+    figures = seal.get("figures")
+    if figures is None:
+        return
+    for name, digest in sorted(figures.get("files", {}).items()):
+        path = root / name
+        if not path.is_file():
+            check.problems.append((name, "a sealed figure or table is missing"))
+        elif file_digest(path) != digest:
+            check.problems.append((name, "differs from its seal"))
+    if figures.get("inputs") != inputs_digest(seal):
+        check.pending.append(
+            (
+                FIGURES_FOLDER,
+                "made from an earlier state of the trials (stale): `lonlib analyse` again",
+            )
+        )
+
+
+def check_readable(root: Path, manifest: Mapping[str, Any], verb: str) -> SealCheck:
+    """A reader's gate (``lonlib run`` on resume, ``analyse``, ``record``, ``thin``): stop
+    with one line naming the file that differs from the seal, before any compute; warn
+    (:class:`UnsealedDataWarning`) when the folder has no seal. Figures and recordings are
+    checked by ``lonlib verify`` (a reader of trials does not read them)."""
+    check = check_experiment_seal(root, manifest, figures=False, recordings=False)
+    if not check.sealed:
+        warnings.warn(
+            f"{root}: unsealed (written before digests): `lonlib {verb}` cannot tell whether it "
+            f"changed since it was written; `lonlib verify {root} --seal` seals it after a "
+            "full replay",
+            UnsealedDataWarning,
+            stacklevel=2,
+        )
+    check.raise_if_tampered()
+    return check
+
+
+# --------------------------------------------------------------- folders of files (studies)
+
+
+def _patterns(folder: Path) -> list[str]:
+    ignore = folder / ".gitignore"
+    lines = ignore.read_text().splitlines() if ignore.is_file() else []
+    return [line.strip() for line in lines if line.strip() and not line.startswith("#")]
+
+
+def _sealable_files(folder: Path, top: Path | None = None) -> dict[str, Path]:
+    """The files of a study folder that are kept: not matched by a ``.gitignore`` on the
+    way down (``*.npz``, ``inflight/``; names only, the patterns these folders use) nor
+    temporaries, except the seal, the ``.gitignore`` files and any subfolder with a seal of
+    its own (sealed by itself)."""
+    top = folder if top is None else top
+    patterns = [*_patterns(folder), ".*.tmp", "*.tmp"]
+    return _walk(folder, top, patterns)
+
+
+def _walk(folder: Path, top: Path, patterns: list[str]) -> dict[str, Path]:
+    out: dict[str, Path] = {}
+    patterns = [*patterns, *_patterns(folder)]
+    for path in sorted(folder.iterdir()):
+        name = path.name
+        if path.is_dir():
+            ignored = any(p.rstrip("/") == name for p in patterns if p.endswith("/"))
+            if not ignored and not (path / SEAL_NAME).is_file():
+                out.update(_walk(path, top, patterns))
+        elif name not in (SEAL_NAME, ".gitignore") and not any(
+            fnmatch(name, p) for p in patterns if not p.endswith("/")
+        ):
+            out[path.relative_to(top).as_posix()] = path
+    return out
+
+
+def seal_files(folder: Path) -> int:
+    """Seal a folder that is not an experiment (a study's stored summaries): each kept
+    file's digest. Returns the number of files sealed."""
+    folder = Path(folder)
+    files = _sealable_files(folder)
+    _write(
+        folder / SEAL_NAME,
+        {
+            "format": SEAL_FORMAT,
+            "kind": "files",
+            "files": {name: file_digest(path) for name, path in files.items()},
+        },
+    )
+    return len(files)
+
+
+def reseal_files_if_sealed(folder: Path) -> None:
+    """A writer of a sealed study folder reseals what it wrote (nothing if unsealed)."""
+    if is_sealed(folder):
+        seal_files(folder)
+
+
+def check_files_seal(folder: Path) -> SealCheck:
+    """Compare a ``files`` seal with the folder: a missing or changed file is a problem, a
+    kept file the seal does not list is pending (written since; sealed by the next writer
+    or ``lonlib verify --seal``)."""
+    folder = Path(folder)
+    check = SealCheck(folder, is_sealed(folder))
+    if not check.sealed:
+        return check
+    seal = _read(folder / SEAL_NAME)
+    listed = seal.get("files", {})
+    present = _sealable_files(folder)
+    for name, digest in sorted(listed.items()):
+        if name not in present:
+            check.problems.append((name, "a sealed file is missing"))
+        elif file_digest(present[name]) != digest:
+            check.problems.append((name, "differs from its seal"))
+    for name in sorted(set(present) - set(listed)):
+        check.pending.append((name, "not in the seal (written since it was sealed)"))
+    return check
+
+
+def seal_pending_trials(run_folder: Path, root: Path) -> int:
+    """Seal a run's trials written but not sealed (a kill between the table and its
+    digests, or a failed digests write): their rows and their files as they are. Called by
+    the process that takes the run (holding its lock) after the folder's seal was checked;
+    nothing in an unsealed experiment. Returns the number of trials sealed."""
+    root, run_folder = Path(root), Path(run_folder)
+    table = run_folder / "trials.parquet"
+    if not is_sealed(root) or not table.exists():
+        return 0
+    path = run_folder / RUN_DIGESTS
+    entries = _read(path)["trials"] if path.exists() else []
+    rows = table_row_digests(table.read_bytes())
+    pending = len(rows) - len(entries)
+    if pending <= 0:
+        return 0
+    for index in range(len(entries), len(rows)):
+        names = [n.format(index) for n in RUN_FILES if (run_folder / n.format(index)).is_file()]
+        files = {n: file_digest(run_folder / n) for n in names}
+        entries.append({"index": index, "row": rows[index], "files": files})
+    _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(run_folder, root), entries)})
+    return pending
+
+
+__all__ = [
+    "RUN_DIGESTS",
+    "SEAL_NAME",
+    "SealCheck",
+    "TamperedDataError",
+    "UnsealedDataWarning",
+    "append_trial",
+    "check_experiment_seal",
+    "check_files_seal",
+    "check_readable",
+    "file_digest",
+    "is_sealed",
+    "reseal_files",
+    "reseal_files_if_sealed",
+    "reseal_outputs",
+    "refresh_root",
+    "row_digests",
+    "seal_files",
+    "seal_runs",
+    "seal_pending_trials",
+    "write_root",
+]

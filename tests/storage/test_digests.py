@@ -1,0 +1,333 @@
+"""Digests (:mod:`lonlib.storage.digests`): every change to a stored experiment is named by
+``lonlib verify`` and refused by its readers; an interrupted write never reads as tampered;
+the committed folders are sealed and match their seals."""
+
+import dataclasses
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from lonlib.analysis.pipeline import load_experiment
+from lonlib.analysis.verify import verify_experiment
+from lonlib.cli import main as cli_main
+from lonlib.config import load_config
+from lonlib.experiment.running import run_experiment
+from lonlib.storage.digests import (
+    RUN_DIGESTS,
+    SEAL_NAME,
+    TamperedDataError,
+    UnsealedDataWarning,
+    check_experiment_seal,
+    check_files_seal,
+    seal_files,
+)
+from lonlib.storage.layout import optimum_path, read_manifest, run_dir, trials_path
+from lonlib.storage.thin import thin_histories
+from lonlib.storage.trials import load_run_state
+from tests.conftest import write_tiny_yaml
+
+ROOT = Path(__file__).resolve().parents[2]
+COMMITTED = [ROOT / "data" / "reference", ROOT / "data" / "one-cart"]
+P, SEARCHES = 1e-3, 3
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """One p, two runs of three 60-step searches, uninterrupted: (YAML path, folder)."""
+    folder = tmp_path_factory.mktemp("digests")
+    tiny = load_config(write_tiny_yaml(folder, max_steps=60))
+    config = dataclasses.replace(tiny, perturbations=(P,), max_local_searches=SEARCHES)
+    path = folder / "small.yaml"
+    path.write_text(yaml.safe_dump(config.to_dict()))
+    run_experiment(config, folder / "out", progress=False)
+    return path, folder / "out"
+
+
+@pytest.fixture
+def copy(small, tmp_path):
+    shutil.copytree(small[1], tmp_path / "out")
+    return tmp_path / "out"
+
+
+def findings(folder: Path) -> list[str]:
+    return [str(f) for f in verify_experiment(folder, recordings=False).errors]
+
+
+def assert_caught(folder: Path, name: str, yaml_path: Path) -> None:
+    """verify names ``name``; resume and analysis refuse with one line naming it."""
+    errors = findings(folder)
+    assert any("[digest]" in e and name in e for e in errors), errors
+    with pytest.raises(TamperedDataError, match=f"{name}.*lonlib verify") as caught:
+        run_experiment(load_config(yaml_path), folder, progress=False)
+    assert "\n" not in str(caught.value)
+    with pytest.raises(TamperedDataError, match=name):
+        load_experiment(folder)
+
+
+def test_a_new_experiment_is_sealed_and_verifies(small):
+    _, out = small
+    assert (out / SEAL_NAME).is_file()
+    assert len(list(out.glob(f"p=*/run_*/{RUN_DIGESTS}"))) == 2
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+    report = verify_experiment(out, recordings=False)
+    assert report.ok and report.sealed and report.findings == []
+
+
+def rewrite_table(folder, run, change):
+    path = trials_path(folder, P, run)
+    table = pd.read_parquet(path)
+    changed = change(table)
+    (table if changed is None else changed).to_parquet(path)
+
+
+def rewrite_optimum(folder, run, index, change):
+    path = optimum_path(folder, P, run, index)
+    with np.load(path) as data:
+        arrays = {k: data[k].copy() for k in data.files}
+    change(arrays)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    path.write_bytes(buffer.getvalue())
+
+
+def ulp(arrays):
+    arrays["theta"][3] = np.nextafter(arrays["theta"][3], np.float32(np.inf))
+
+
+def plus(name, delta):
+    def change(arrays):
+        arrays[name] = arrays[name] + np.asarray(delta, dtype=arrays[name].dtype)
+
+    return change
+
+
+TABLE_EDITS = {
+    "fitness + 1e-6": lambda t: t.__setitem__("fitness", t["fitness"] + 1e-6),
+    "stop_reason": lambda t: t.__setitem__(
+        "stop_reason", "patience" if t["stop_reason"].iloc[0] != "patience" else "budget"
+    ),
+    "env_steps + 1": lambda t: t.__setitem__("env_steps", t["env_steps"] + 1),
+    "p + 1 ulp": lambda t: t.__setitem__("p", np.nextafter(t["p"], 1.0)),
+}
+
+
+@pytest.mark.parametrize("edit", list(TABLE_EDITS))
+def test_an_edited_trials_table_is_named_and_refused(small, copy, edit):
+    rewrite_table(copy, 0, TABLE_EDITS[edit])
+    assert_caught(copy, "run_0000/trials.parquet", small[0])
+
+
+@pytest.mark.parametrize(
+    "change",
+    [ulp, plus("fitness", 1e-6), plus("omega", 1e-3)],
+    ids=["one float32 ulp of the Actor", "the file's own fitness + 1e-6", "the Critic + 1e-3"],
+)
+def test_an_edited_optimum_is_named_and_refused(small, copy, change):
+    rewrite_optimum(copy, 1, 1, change)
+    assert_caught(copy, "run_0001/optimum_0001.npz", small[0])
+
+
+def test_removed_last_trials_are_named_and_refused(small, copy):
+    """A careful partial copy: the last trial's row, files and digests entry all removed."""
+    folder = run_dir(copy, P, 0)
+    rewrite_table(copy, 0, lambda t: t.iloc[:-1])
+    for path in folder.glob(f"*_{SEARCHES - 1:04d}.*"):
+        path.unlink()
+    digests = json.loads((folder / RUN_DIGESTS).read_text())
+    digests["trials"] = digests["trials"][:-1]
+    (folder / RUN_DIGESTS).write_text(json.dumps(digests))
+    assert_caught(copy, "run_0000/trials.parquet", small[0])
+
+
+def test_a_removed_run_and_an_edited_setting_are_named(small, copy):
+    manifest = copy / "manifest.json"
+    manifest.write_text(manifest.read_text().replace('"tolerance": 2', '"tolerance": 3'))
+    assert any("manifest.json" in e for e in findings(copy))
+    shutil.rmtree(run_dir(copy, P, 1))
+    assert any("run_0001/trials.parquet" in e for e in findings(copy))
+
+
+def test_the_incumbent_on_resume_is_the_tables_fitness(small):
+    _, out = small
+    config = load_config(small[0]).basin_hopping(P)
+    state = load_run_state(out, P, 0, config)
+    table = pd.read_parquet(trials_path(out, P, 0))
+    assert state.incumbent.fitness == table["fitness"].iloc[state.incumbent_index]
+
+
+def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, capsys):
+    (copy / SEAL_NAME).unlink()
+    for path in copy.glob(f"p=*/run_*/{RUN_DIGESTS}"):
+        path.unlink()
+    with pytest.warns(UnsealedDataWarning, match="unsealed .* --seal"):
+        load_experiment(copy)
+    report = verify_experiment(copy, recordings=False)
+    assert report.ok and not report.sealed
+    assert any("unsealed" in str(f) for f in report.warnings)
+    cli_main(["verify", "--no-recordings", "--seal", str(copy)])
+    assert "sealed:" in capsys.readouterr().out
+    assert verify_experiment(copy, recordings=False).findings == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_experiment(copy)
+
+
+def test_a_folder_that_fails_verify_is_not_sealed(small, copy):
+    (copy / SEAL_NAME).unlink()
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    with pytest.raises(SystemExit):
+        cli_main(["verify", "--no-recordings", "--seal", str(copy)])
+    assert not (copy / SEAL_NAME).exists()
+
+
+def test_thin_checks_the_seal_then_reseals_what_it_rewrote(small, copy):
+    thin_histories(copy)
+    assert verify_experiment(copy, recordings=False).findings == []
+    rewrite_optimum(copy, 0, 0, ulp)
+    with pytest.raises(TamperedDataError, match="optimum_0000.npz"):
+        thin_histories(copy)
+
+
+def test_thin_refuses_a_linked_table(small, copy, tmp_path):
+    target = tmp_path / "elsewhere.parquet"
+    shutil.copy(trials_path(copy, P, 0), target)
+    trials_path(copy, P, 0).unlink()
+    trials_path(copy, P, 0).symlink_to(target)
+    before = {p: p.read_bytes() for p in run_dir(copy, P, 0).glob("history_*")}
+    with pytest.raises(Exception, match="symbolic link"):
+        thin_histories(copy)
+    assert before == {p: p.read_bytes() for p in run_dir(copy, P, 0).glob("history_*")}
+
+
+KILLER = """
+import os, signal, sys
+from fnmatch import fnmatch
+from pathlib import Path
+import lonlib.storage.atomic as atomic, lonlib.storage.digests as digests
+import lonlib.storage.trials as trials
+from lonlib.config import load_config
+from lonlib.experiment.running import run_experiment
+
+pattern, count, original, seen = sys.argv[3], int(sys.argv[4]), atomic.atomic_write, [0]
+
+def write_then_maybe_die(path, data):
+    original(path, data)
+    if fnmatch(Path(path).name, pattern):
+        seen[0] += 1
+        if seen[0] == count:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+for module in (atomic, digests, trials):
+    module.atomic_write = write_then_maybe_die
+run_experiment(load_config(sys.argv[1]), Path(sys.argv[2]), progress=False)
+"""
+
+KILL_POINTS = [
+    ("manifest.json", 1),  # the new experiment's manifest, before any trial
+    ("history_*.parquet", 3),  # a trial's files written, its row not
+    ("optimum_*.npz", 4),
+    ("trials.parquet", 2),  # the row written, not yet sealed in the run
+    ("trials.parquet", 5),
+    (RUN_DIGESTS, 4),  # sealed in the run, not yet in the root
+    (SEAL_NAME, 1),  # the root sealed ahead of the new manifest
+    ("manifest.json", 2),  # the session's end recorded, the root not yet updated
+]
+
+
+@pytest.mark.parametrize("point", KILL_POINTS, ids=[f"{p}#{n}" for p, n in KILL_POINTS])
+def test_a_sigkill_at_each_write_resumes_and_verifies_never_tampered(small, tmp_path, point):
+    yaml_path, expected = small
+    out = tmp_path / "killed"
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(
+        [sys.executable, str(script), str(yaml_path), str(out), point[0], str(point[1])],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr[-2000:]
+    if (out / "manifest.json").exists():  # what the kill left reads as pending, never tampered
+        check = check_experiment_seal(out, read_manifest(out))
+        assert check.ok, check.problems
+    run_experiment(load_config(yaml_path), out, progress=False)
+    for run in range(2):
+        assert_frame_equal_bits(trials_path(out, P, run), trials_path(expected, P, run))
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+    assert verify_experiment(out, recordings=False).errors == []
+
+
+def assert_frame_equal_bits(path, expected):
+    columns = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps", "label"]
+    got, want = pd.read_parquet(path)[columns], pd.read_parquet(expected)[columns]
+    pd.testing.assert_frame_equal(got, want, check_exact=True)
+
+
+def test_a_deleted_or_renamed_recording_is_named(tmp_path):
+    copy = tmp_path / "reference"
+    shutil.copytree(COMMITTED[0], copy)
+    recordings = sorted((copy / "recordings").glob("*.rrd"))
+    recordings[0].unlink()
+    renamed = recordings[1].with_name("best_balancing_optimum_p=0.001_run=4_f=0.951.rrd")
+    recordings[1].rename(renamed)
+    problems = dict(check_experiment_seal(copy, read_manifest(copy)).problems)
+    assert problems[f"recordings/{recordings[0].name}"].endswith("is missing")
+    assert problems[f"recordings/{recordings[1].name}"].endswith(f"is renamed to {renamed.name}")
+    assert problems[f"recordings/{renamed.name}"] == "not in the recordings index"
+
+
+def test_a_study_folder_is_sealed_file_by_file(tmp_path, capsys):
+    folder = tmp_path / "study"
+    (folder / "cells").mkdir(parents=True)
+    (folder / ".gitignore").write_text("*.npz\ninflight/\n")
+    (folder / "cells" / "a.json").write_text("{}")
+    (folder / "cells" / "a.npz").write_bytes(b"ignored")
+    (folder / "study.csv").write_text("x\n1\n")
+    assert seal_files(folder) == 2
+    cli_main(["verify", str(folder)])
+    assert "verify: OK" in capsys.readouterr().out
+    (folder / "study.csv").write_text("x\n2\n")
+    (folder / "cells" / "b.json").write_text("{}")
+    check = check_files_seal(folder)
+    assert check.problems == [("study.csv", "differs from its seal")]
+    assert [name for name, _ in check.pending] == ["cells/b.json"]
+    with pytest.raises(SystemExit):
+        cli_main(["verify", str(folder)])
+
+
+STUDIES = sorted(p.parent for p in (ROOT / "data" / "studies").glob(f"*/{SEAL_NAME}"))
+
+
+@pytest.mark.parametrize("folder", COMMITTED, ids=lambda p: p.name)
+def test_the_committed_experiments_are_sealed_and_match(folder):
+    check = check_experiment_seal(folder, read_manifest(folder))
+    assert check.sealed and check.ok and check.pending == [], (check.problems, check.pending)
+
+
+def test_the_committed_study_folders_are_sealed_and_match():
+    assert STUDIES, "no sealed study folder"
+    for folder in STUDIES:
+        check = check_files_seal(folder)
+        assert check.ok, (folder, check.problems)
+
+
+def test_a_deleted_root_seal_of_a_sealed_experiment_is_named_not_unsealed(small, copy):
+    (copy / SEAL_NAME).unlink()
+    assert any("seal.json: missing, while 2 run(s)" in e for e in findings(copy))
+    with pytest.raises(TamperedDataError, match="seal.json"):
+        load_experiment(copy)
