@@ -14,6 +14,7 @@ from lonlib.calibration.report import CalibrationResult, write_outputs
 from lonlib.calibration.study import cell_starts, run_and_store_cell
 from lonlib.config import CalibrationConfig
 from lonlib.storage.atomic import atomic_write, write_json
+from lonlib.storage.digests import reseal_files_if_sealed
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
 
@@ -62,6 +63,7 @@ def run_calibration(
         out / "calibration.json",
         {"config": config.to_dict(), "updated": datetime.now(UTC).isoformat(timespec="seconds")},
     )
+    reseal_files_if_sealed(out)
     bar = progress_bar(
         total=len(config.cells),
         initial=len(config.cells) - len(todo),
