@@ -149,7 +149,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
         check_lockstep(config.ddpg, slots)
     check_drain(kind, None if args.drain_after is None else args.drain_after * 60)
     sized = dataclasses.replace(config, slots=slots)
-    searches = concurrent_searches(sized, kind, args.workers)
+    searches = concurrent_searches(sized, kind, args.workers, args.scheduler)
     check_memory(sized, searches)
     state = _check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
@@ -183,10 +183,15 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
 
 
 def _dry_run_reader(verb: str, root: Path) -> None:
-    """``--dry-run`` of a verb that reads an experiment: the folder holds one."""
+    """``--dry-run`` of a verb that reads an experiment: the folder holds one, and (but for
+    verify) its data match their seal."""
+    from lonlib.storage.digests import check_readable
     from lonlib.storage.layout import read_manifest
 
-    name = read_manifest(root)["config"].get("name", "?")
+    manifest = read_manifest(root)
+    if verb != "verify":  # a reader refuses changed data; verify reports it
+        check_readable(root, manifest, verb)
+    name = manifest["config"].get("name", "?")
     print(f"dry run: lonlib {verb} would read the experiment {name!r} in {root}. Nothing done.")
 
 
@@ -316,6 +321,10 @@ def _verify(args: argparse.Namespace) -> None:
         print(f"... {len(report.findings) - len(shown)} more (--all shows every finding)")
     print(report.summary())
     failed = not report.ok
+    if args.seal:  # --seal completes its own interrupted seal: that finding does not stop it
+        from lonlib.analysis.verify import blocks_sealing
+
+        failed = blocks_sealing(report)
     if args.gymnasium:
         from lonlib.storage.policies import gymnasium_mismatches
 

@@ -56,8 +56,8 @@ from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
 from lonlib.lon.metrics import lon_metrics
-from lonlib.storage.digests import reseal_outputs
-from lonlib.storage.layout import optimum_path, stored_config
+from lonlib.storage.digests import check_experiment_seal, is_sealed, reseal_outputs
+from lonlib.storage.layout import optimum_path, read_manifest, stored_config
 from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
 from lonlib.util.figures import save_png
@@ -357,6 +357,8 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
     check_range("bins", bins, 1)
     folder = Path(folder)
     config, trials = load_experiment(folder)
+    if is_sealed(folder):  # what the index will list must be what it listed, before any compute
+        check_experiment_seal(folder, read_manifest(folder), figures=False).raise_if_tampered()
     selection = optima_to_record(trials, bins)
     if limit:
         selection = selection.head(limit)

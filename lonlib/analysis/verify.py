@@ -53,15 +53,22 @@ from lonlib.storage.digests import (
     reseal_outputs,
     seal_runs,
 )
-from lonlib.storage.layout import MANIFEST_LOCK, optimum_path, read_manifest
-from lonlib.storage.lock import exclusive_lock
+from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, optimum_path, read_manifest
+from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.result_path import KNOWN_RESULT_PATH_VERSIONS, RESULT_PATH_VERSION
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
 from lonlib.task.policy import actor_spec
 from lonlib.task.rollout import score_actors
 
-__all__ = ["Finding", "VerifyReport", "seal_experiment", "seal_findings", "verify_experiment"]
+__all__ = [
+    "Finding",
+    "VerifyReport",
+    "blocks_sealing",
+    "seal_experiment",
+    "seal_findings",
+    "verify_experiment",
+]
 
 
 @dataclass(frozen=True)
@@ -91,6 +98,7 @@ class VerifyReport:
     recordings: int = 0  # recordings checked
     current_version: bool = True  # every session ran the current result-path version
     sealed: bool = True  # the folder has a seal (lonlib.storage.digests)
+    recordings_checked: bool = True  # the recordings were replayed and their index checked
     findings: list[Finding] = field(default_factory=list)
 
     @property
@@ -234,6 +242,7 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     report.findings.extend(_provenance_findings(folder))
     seal = check_experiment_seal(folder, read_manifest(folder), recordings=recordings)
     report.sealed = seal.sealed
+    report.recordings_checked = recordings
     report.findings.extend(seal_findings(seal))
     # Algorithm 2's bookkeeping does not depend on the result path: always an error
     report.findings.extend(algorithm_findings(config, trials))
@@ -281,15 +290,35 @@ def seal_experiment(report: VerifyReport) -> None:
     """Seal the experiment ``report`` verified (``lonlib verify --seal``): every run's trials
     and files, the recordings index and the figures, as they are. ValueError when the
     verification failed: a folder is sealed only after a full replay holds."""
-    if not report.ok:
-        raise ValueError(
-            f"{report.folder}: verify failed; a folder is sealed only when it verifies"
-        )
+    # A seal interrupted part-way (runs sealed, the root not yet) is this command's own
+    # state: sealing again completes it. Every other finding stops it.
+    if blocks_sealing(report):
+        raise ValueError(f"{report.folder}: verify failed; only a folder that verifies is sealed")
+    if not report.recordings_checked:
+        raise ValueError("--seal seals the recordings too: run it without --no-recordings")
     folder = report.folder
-    with exclusive_lock(folder / MANIFEST_LOCK, record_holder=False):
-        seal_runs(folder, read_manifest(folder))
-    figures = sorted(p for p in (folder / FIGURES_FOLDER).glob("*") if p.is_file())
-    reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
+    sampling = SamplingLock(folder / SAMPLING_LOCK)
+    try:
+        sampling.acquire(exclusive=True)
+    except LockHeld:
+        raise ValueError(f"{folder}: a sampling session is running; seal it once it ends") from None
+    try:
+        with exclusive_lock(folder / MANIFEST_LOCK, record_holder=False):
+            seal_runs(folder, read_manifest(folder))
+        figures = sorted(p for p in (folder / FIGURES_FOLDER).glob("*") if p.is_file())
+        reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
+    finally:
+        sampling.release()
+
+
+def blocks_sealing(report: VerifyReport) -> bool:
+    """Whether ``report`` has an error other than this command's own interrupted seal (runs
+    sealed, the root not yet), which sealing again completes."""
+    return any(not _interrupted_seal(finding) for finding in report.errors)
+
+
+def _interrupted_seal(finding: Finding) -> bool:
+    return finding.check == "digest" and finding.message.startswith("seal.json: missing, while")
 
 
 def algorithm_findings(config, trials: pd.DataFrame, severity: str = "error") -> list[Finding]:

@@ -25,12 +25,15 @@ def search_memory_bytes(env: PendulumConfig, hp: DDPGConfig) -> int:
     return hp.buffer_size * transition + hp.batch_size * minibatch
 
 
-def concurrent_searches(config: ExperimentConfig, kind: str, workers: int) -> int:
-    """Local searches one machine holds at once: a lockstep batch's ``slots`` (per worker
-    process), else one per worker process (Dask workers run on their own machines: one)."""
+def concurrent_searches(
+    config: ExperimentConfig, kind: str, workers: int, scheduler: str | None = None
+) -> int:
+    """Local searches this machine holds at once: a lockstep batch's ``slots`` (per worker
+    process), one per worker process of a pool or of ``dask-local``'s cluster, else one (a
+    remote Dask cluster's workers run on their own machines)."""
     if kind == "lockstep":
         return config.slots * max(1, workers)
-    if kind == "pool":
+    if kind == "pool" or (kind == "dask" and scheduler == "dask-local"):
         return max(1, workers)
     return 1
 

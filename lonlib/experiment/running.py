@@ -182,7 +182,7 @@ def run_experiment(
         config, workers, scheduler, max_attempts, executor, slots, checkpoint_seconds
     )
     check_drain(kind, drain_after_seconds)
-    check_memory(config, concurrent_searches(config, kind, workers))  # before any folder
+    check_memory(config, concurrent_searches(config, kind, workers, scheduler))  # before any folder
     drain_at = None if drain_after_seconds is None else started + drain_after_seconds
     out = Path(out)
     check_output_folder(out)

@@ -13,7 +13,7 @@ import numpy as np
 from lonlib.config import ExperimentConfig
 from lonlib.search.algorithm import BasinHoppingRun, RunState, random_parameters
 from lonlib.storage.atomic import remove_temporary_files
-from lonlib.storage.digests import seal_pending_trials
+from lonlib.storage.digests import drop_unwritten_trials
 from lonlib.storage.inflight import Plan
 from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config
 from lonlib.storage.lock import LockHeld, exclusive_lock
@@ -51,7 +51,7 @@ def open_run(out: Path, config: ExperimentConfig, p: float, run: int) -> BasinHo
     """Algorithm 2's driver of run ``(p, run)``, resumed from what is stored (call with the
     run's lock held: a holder before us may have stored more than the caller saw)."""
     remove_temporary_files(run_dir(out, p, run))
-    seal_pending_trials(run_dir(out, p, run), out)  # a trial stored, its digests not
+    drop_unwritten_trials(run_dir(out, p, run), out)  # sealed ahead, its row never written
     bh = config.basin_hopping(p)
     state = load_run_state(out, p, run, bh)
     return BasinHoppingRun(initial_parameters(config, p, run), bh, config.run_seed(p, run), state)

@@ -19,14 +19,14 @@ Each run's entries are chained (entry *i* hashes entry *i − 1*'s chain value),
 keeps each run's count and head, so removing a run's last trials (rows, files and entries
 alike) no longer matches the root.
 
-**Write order** (each file by atomic rename): a trial's history and optimum, the trials table
-(the run's commit point), the run's ``digests.json``, and the root at the session's open and
-close. A SIGKILL between two of them leaves a folder that reads as *pending*, never as
-tampered: files of a trial the table lacks are leftovers the next run overwrites; a row the
-run's digests lack is a trial written but not sealed, which the next process that takes the
-run seals as it is (:func:`seal_pending_trials`: the trial is kept, not redone); a run chain
-longer than the root's count is sealed in the run and recorded in the root at the next
-session. Anything else that differs is tampered data.
+**Write order** (each file by atomic rename): a trial's history and optimum, the run's
+``digests.json`` (the trial sealed ahead), the trials table (the run's commit point), and the
+root at the session's open and close. A SIGKILL between two of them leaves a folder that reads
+as *pending*, never as tampered: files of a trial the table lacks are leftovers the next run
+overwrites; a trial sealed ahead of a table write that did not happen is redone by the next
+process that takes the run (:func:`drop_unwritten_trials`); a run chain longer than the root's
+count is recorded in the root at the next session. A row the run's digests do not seal, and
+anything else that differs, is tampered data.
 
 A folder that is not an experiment (a study's summaries) gets a ``files`` seal: each file's
 digest (:func:`seal_files`, :func:`check_files_seal`).
@@ -38,6 +38,7 @@ import hashlib
 import io
 import json
 import math
+import re
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -57,6 +58,7 @@ SEAL_FORMAT = 1
 FIGURES_FOLDER = "figures"
 RECORDINGS_FOLDER = "recordings"
 RUN_FILES = ("optimum_{:04d}.npz", "history_{:04d}.parquet")
+_TRIAL_FILE = re.compile(r"(?:optimum|history)_(\d{4,})\.(?:npz|parquet)")
 """A trial's files in its run's folder (:mod:`lonlib.storage.layout`), by trial index."""
 
 
@@ -127,12 +129,34 @@ def _entry_text(entry: Mapping[str, Any]) -> str:
 
 
 def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """``entries`` with their chain values computed from the run's start."""
+    """``entries`` with their chain values computed from the run's start (a rewrite sealed
+    ahead, ``next``, is kept beside the chain, outside it)."""
     previous, out = _chain_start(key), []
     for entry in entries:
         previous = bytes_digest((previous + _entry_text(entry)).encode())
-        out.append({**{k: entry[k] for k in ("index", "row", "files")}, "chain": previous})
+        new = {**{k: entry[k] for k in ("index", "row", "files")}, "chain": previous}
+        if entry.get("next"):
+            new["next"] = dict(entry["next"])
+        out.append(new)
     return out
+
+
+def settle_ahead(run_folder: Path, root: Path) -> None:
+    """Make a rewrite sealed ahead (``next``, :func:`seal_ahead`) the seal where the file now
+    holds it, and forget the rest (a ``lonlib thin`` killed part-way, completed)."""
+    path = Path(run_folder) / RUN_DIGESTS
+    if not path.exists():
+        return
+    entries = _read(path)["trials"]
+    if not any(entry.get("next") for entry in entries):
+        return
+    for entry in entries:
+        for name, digest in entry.pop("next", {}).items():
+            file = Path(run_folder) / name
+            if file.is_file() and file_digest(file) == digest:
+                entry["files"][name] = digest
+    key = _run_key(Path(run_folder), Path(root))
+    _write(path, {"format": SEAL_FORMAT, "trials": _chained(key, entries)})
 
 
 def _write(path: Path, payload: Mapping[str, Any]) -> None:
@@ -140,13 +164,63 @@ def _write(path: Path, payload: Mapping[str, Any]) -> None:
 
 
 def _read(path: Path) -> dict[str, Any]:
+    """A seal or a run's digests, read and checked for shape (TamperedDataError naming the
+    file and what is wrong, never a traceback)."""
     try:
         payload = json.loads(path.read_bytes())
     except (OSError, ValueError) as error:
         raise TamperedDataError(f"{path}: cannot read the digests ({error})") from None
     if not isinstance(payload, dict) or payload.get("format") != SEAL_FORMAT:
         raise TamperedDataError(f"{path}: not a lonlib seal of format {SEAL_FORMAT}")
+    problem = _shape_problem(payload, path.name == RUN_DIGESTS)
+    if problem:
+        raise TamperedDataError(f"{path}: not a well-formed seal ({problem})")
     return payload
+
+
+def _is_digest(value: object) -> bool:
+    return isinstance(value, str) and len(value) == 64
+
+
+def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
+    """What is malformed in a seal (``run``: a run's ``digests.json``), or None."""
+    if run:
+        entries = payload.get("trials")
+        if not isinstance(entries, list):
+            return "'trials' is not a list"
+        for i, entry in enumerate(entries):
+            if not isinstance(entry, dict) or entry.get("index") != i:
+                return f"trial entry {i} is not an object with index {i}"
+            files = entry.get("files")
+            if not (_is_digest(entry.get("row")) and _is_digest(entry.get("chain"))):
+                return f"trial entry {i} lacks its row or chain digest"
+            if not isinstance(files, dict) or not all(
+                isinstance(k, str) and _is_digest(v) for k, v in files.items()
+            ):
+                return f"trial entry {i}'s 'files' is not a mapping of names to digests"
+            if not isinstance(entry.get("next", {}), dict):
+                return f"trial entry {i}'s 'next' is not a mapping"
+        return None
+    if payload.get("kind") == "files":
+        files = payload.get("files")
+        if not isinstance(files, dict) or not all(_is_digest(v) for v in files.values()):
+            return "'files' is not a mapping of names to digests"
+        return None
+    runs = payload.get("runs", {})
+    if not isinstance(runs, dict) or not all(
+        isinstance(v, dict) and isinstance(v.get("trials"), int) and _is_digest(v.get("head"))
+        for v in runs.values()
+    ):
+        return "'runs' is not a mapping of runs to their trial count and head"
+    recordings = payload.get("recordings", {})
+    if not isinstance(recordings, dict) or not all(
+        isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
+    ):
+        return "'recordings' is not a mapping of recordings to their trial and digest"
+    figures = payload.get("figures", {})
+    if not isinstance(figures, dict) or not isinstance(figures.get("files", {}), dict):
+        return "'figures' is not a mapping"
+    return None
 
 
 def is_sealed(root: Path) -> bool:
@@ -175,7 +249,8 @@ def append_trial(
     entries = _read(path)["trials"] if path.exists() else []
     rows = table_row_digests(table_bytes)
     index = len(rows) - 1
-    entries = [e for e in entries if e["index"] < index]  # a redone trial replaces its entry
+    # an entry ahead of a table that was never written (a kill between the two) is replaced
+    entries = [e for e in entries if e["index"] < index]
     if len(entries) != index:
         raise TamperedDataError(
             f"{path}: seals {len(entries)} trials, the table before trial {index} holds {index}"
@@ -276,6 +351,26 @@ def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
     write_root(root, manifest)
 
 
+def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
+    """Before a legitimate rewrite of sealed run files (``lonlib thin``): their new digests
+    beside the old in their runs' entries (``next``), so a kill part-way leaves every file
+    accepted; :func:`reseal_files` then makes the new ones the seal."""
+    root = Path(root)
+    by_run: dict[Path, dict[str, str]] = {}
+    for path, digest in digests.items():
+        by_run.setdefault(Path(path).parent, {})[Path(path).name] = digest
+    for folder, names in by_run.items():
+        path = folder / RUN_DIGESTS
+        if not path.exists():
+            continue
+        entries = _read(path)["trials"]
+        for entry in entries:
+            ahead = {n: d for n, d in names.items() if n in entry["files"]}
+            if ahead:
+                entry["next"] = {**entry.get("next", {}), **ahead}
+        _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)})
+
+
 def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path]) -> None:
     """After a legitimate rewrite of sealed run files (``lonlib thin``): their new digests in
     their runs' chains, then the root. The caller checked the seal before writing."""
@@ -291,6 +386,7 @@ def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path])
         names = {p.name: file_digest(p) for p in changed}
         for entry in entries:
             entry["files"] = {n: names.get(n, d) for n, d in entry["files"].items()}
+            entry.pop("next", None)
         _write(
             digests, {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
         )
@@ -418,28 +514,37 @@ def _check_run(
     except Exception as error:  # pyarrow raises several types for a damaged file
         check.problems.append((f"{key}/trials.parquet", f"cannot be read ({error})"))
         return
-    if len(rows) < len(entries):
+    if len(rows) < count:
         check.problems.append(
-            (f"{key}/trials.parquet", f"holds {len(rows)} trials, {len(entries)} are sealed")
+            (f"{key}/trials.parquet", f"holds {len(rows)} trials, the seal holds {count}")
+        )
+    elif len(rows) < len(entries):
+        check.pending.append(
+            (
+                f"{key}/{RUN_DIGESTS}",
+                f"{len(entries) - len(rows)} trial(s) sealed ahead of a table write that did not "
+                "happen (an interrupted write): the next process that takes the run redoes them",
+            )
         )
     for entry, row in zip(entries, rows, strict=False):
         if entry["row"] != row:
             check.problems.append(
                 (f"{key}/trials.parquet", f"trial {entry['index']}'s row differs from its seal")
             )
-    for entry in entries:
+    for entry in entries[: len(rows)]:
         for name, digest in entry["files"].items():
             path = folder / name
+            accepted = (digest, entry.get("next", {}).get(name))  # a rewrite sealed ahead
             if not path.is_file():
                 check.problems.append((f"{key}/{name}", "a sealed file is missing"))
-            elif file_digest(path) != digest:
+            elif file_digest(path) not in accepted:
                 check.problems.append((f"{key}/{name}", "differs from its seal"))
     if len(rows) > len(entries):
-        check.pending.append(
+        check.problems.append(
             (
                 f"{key}/trials.parquet",
-                f"{len(rows) - len(entries)} trial(s) written but not sealed (an interrupted "
-                "write): the next process that takes the run seals them",
+                f"holds {len(rows) - len(entries)} trial(s) its run's digests do not seal "
+                "(rows added after the seal)",
             )
         )
     if len(entries) > count:
@@ -452,12 +557,13 @@ def _check_run(
             )
         )
     check.sealed_trials[key] = min(len(entries), len(rows))
-    sealed_names = {n for e in entries for n in e["files"]}
-    for path in sorted(folder.glob("*_[0-9][0-9][0-9][0-9].*")):
-        index = int(path.stem.rsplit("_", 1)[1])
-        if path.name in sealed_names:
-            continue
-        if index >= len(entries):
+    sealed_names = {n for e in entries[: len(rows)] for n in e["files"]}
+    for path in sorted(folder.iterdir()):
+        match = _TRIAL_FILE.fullmatch(path.name)
+        if match is None or path.name in sealed_names:
+            continue  # not a trial's file (a temporary, the table, the lock), or sealed
+        index = int(match.group(1))
+        if index >= len(rows):
             check.pending.append((f"{key}/{path.name}", "a leftover of an unsealed trial"))
         else:
             check.problems.append((f"{key}/{path.name}", "a file no seal lists"))
@@ -570,6 +676,14 @@ def seal_files(folder: Path) -> int:
     """Seal a folder that is not an experiment (a study's stored summaries): each kept
     file's digest. Returns the number of files sealed."""
     folder = Path(folder)
+    if any(folder.glob("p=*/run_*")) or (folder / "manifest.json").exists():
+        raise ValueError(f"{folder}: an experiment's folder: its seal comes from a full verify")
+    if not _sealable_files(folder):
+        raise ValueError(f"{folder}: no file to seal (a typo in the folder's name?)")
+    return _write_files_seal(folder)
+
+
+def _write_files_seal(folder: Path) -> int:
     files = _sealable_files(folder)
     _write(
         folder / SEAL_NAME,
@@ -585,7 +699,7 @@ def seal_files(folder: Path) -> int:
 def reseal_files_if_sealed(folder: Path) -> None:
     """A writer of a sealed study folder reseals what it wrote (nothing if unsealed)."""
     if is_sealed(folder):
-        seal_files(folder)
+        _write_files_seal(Path(folder))
 
 
 def check_files_seal(folder: Path) -> SealCheck:
@@ -596,7 +710,16 @@ def check_files_seal(folder: Path) -> SealCheck:
     check = SealCheck(folder, is_sealed(folder))
     if not check.sealed:
         return check
-    seal = _read(folder / SEAL_NAME)
+    try:
+        seal = _read(folder / SEAL_NAME)
+    except TamperedDataError as error:
+        check.problems.append((SEAL_NAME, str(error).split(": ", 1)[-1]))
+        return check
+    if seal.get("kind") != "files":
+        check.problems.append(
+            ("manifest.json", "missing: the seal is an experiment's, and its manifest is gone")
+        )
+        return check
     listed = seal.get("files", {})
     present = _sealable_files(folder)
     for name, digest in sorted(listed.items()):
@@ -609,27 +732,23 @@ def check_files_seal(folder: Path) -> SealCheck:
     return check
 
 
-def seal_pending_trials(run_folder: Path, root: Path) -> int:
-    """Seal a run's trials written but not sealed (a kill between the table and its
-    digests, or a failed digests write): their rows and their files as they are. Called by
-    the process that takes the run (holding its lock) after the folder's seal was checked;
-    nothing in an unsealed experiment. Returns the number of trials sealed."""
+def drop_unwritten_trials(run_folder: Path, root: Path) -> int:
+    """Drop a run's digests entries sealed ahead of a table write that never happened (a kill
+    between the two, or a failed table write): the next local search redoes that trial.
+    Called by the process that takes the run (holding its lock) after the folder's seal was
+    checked; nothing in an unsealed experiment. Returns the number of entries dropped."""
     root, run_folder = Path(root), Path(run_folder)
-    table = run_folder / "trials.parquet"
-    if not is_sealed(root) or not table.exists():
-        return 0
     path = run_folder / RUN_DIGESTS
-    entries = _read(path)["trials"] if path.exists() else []
-    rows = table_row_digests(table.read_bytes())
-    pending = len(rows) - len(entries)
-    if pending <= 0:
+    if not is_sealed(root) or not path.exists():
         return 0
-    for index in range(len(entries), len(rows)):
-        names = [n.format(index) for n in RUN_FILES if (run_folder / n.format(index)).is_file()]
-        files = {n: file_digest(run_folder / n) for n in names}
-        entries.append({"index": index, "row": rows[index], "files": files})
-    _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(run_folder, root), entries)})
-    return pending
+    entries = _read(path)["trials"]
+    table = run_folder / "trials.parquet"
+    rows = len(table_row_digests(table.read_bytes())) if table.exists() else 0
+    if len(entries) <= rows:
+        return 0
+    kept = entries[:rows]
+    _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(run_folder, root), kept)})
+    return len(entries) - rows
 
 
 __all__ = [
@@ -649,8 +768,10 @@ __all__ = [
     "reseal_outputs",
     "refresh_root",
     "row_digests",
+    "seal_ahead",
     "seal_files",
+    "settle_ahead",
     "seal_runs",
-    "seal_pending_trials",
+    "drop_unwritten_trials",
     "write_root",
 ]

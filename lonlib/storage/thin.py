@@ -23,9 +23,16 @@ from pathlib import Path
 import pandas as pd
 
 from lonlib.storage.atomic import CorruptDataError, atomic_write, parquet_bytes
-from lonlib.storage.digests import check_readable, is_sealed, reseal_files
-from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
-from lonlib.storage.lock import exclusive_lock
+from lonlib.storage.digests import (
+    bytes_digest,
+    check_readable,
+    is_sealed,
+    reseal_files,
+    seal_ahead,
+    settle_ahead,
+)
+from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, read_manifest
+from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 
 HISTORY_GLOB = "p=*/run_*/history_*.parquet"
 """Where an experiment folder keeps its training histories (:mod:`lonlib.storage.layout`)."""
@@ -74,7 +81,12 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
     writes nothing. Idempotent: a thinned history is left as it is."""
     root = Path(folder)
     manifest = read_manifest(root)  # an experiment folder, or the error that says how to make one
-    linked = [p for p in sorted(root.glob("p=*/run_*/*")) if p.is_symlink()]
+    linked = [
+        p
+        for pattern in ("p=*", "p=*/run_*", "p=*/run_*/*")
+        for p in sorted(root.glob(pattern))
+        if p.is_symlink()
+    ]
     if linked:
         raise CorruptDataError(
             f"{linked[0]}: a symbolic link in an experiment's run folder; thin rewrites files "
@@ -82,7 +94,7 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
         )
     check_readable(root, manifest, "thin")  # before any file is rewritten
     files = sorted(root.glob(HISTORY_GLOB))
-    rewritten = []
+    plans = []
     thinned = rows_before = rows_after = bytes_before = bytes_after = 0
     for path in files:
         history = pd.read_parquet(path)
@@ -100,13 +112,42 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
         data = parquet_bytes(kept)
         bytes_after += len(data)
         thinned += 1
-        if not dry_run:
-            atomic_write(path, data)
-            rewritten.append(path)
-    if rewritten and is_sealed(root):
-        with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
-            reseal_files(root, read_manifest(root), rewritten)
+        plans.append((path, data))
+    if not dry_run and (plans or _ahead(root)):
+        _rewrite(root, plans)
     return ThinReport(len(files), thinned, rows_before, rows_after, bytes_before, bytes_after)
+
+
+def _ahead(root: Path) -> bool:
+    """Whether a run of a sealed folder still holds a rewrite sealed ahead (a thin killed
+    part-way, which this thin completes)."""
+    return is_sealed(root) and any(
+        '"next"' in path.read_text() for path in root.glob("p=*/run_*/digests.json")
+    )
+
+
+def _rewrite(root: Path, plans: list[tuple[Path, bytes]]) -> None:
+    """Rewrite the histories, with no sampling session on the folder (it appends to the runs'
+    digests that a reseal rewrites); in a sealed folder their new digests are sealed ahead
+    (a kill part-way leaves each history accepted as old or new), then made the seal."""
+    sampling = SamplingLock(root / SAMPLING_LOCK)
+    try:
+        sampling.acquire(exclusive=True)
+    except LockHeld:
+        raise ValueError(f"{root}: a sampling session is running; thin it once it ends") from None
+    try:
+        sealed = is_sealed(root)
+        if sealed:
+            seal_ahead(root, {path: bytes_digest(data) for path, data in plans})
+        for path, data in plans:
+            atomic_write(path, data)
+        if sealed:
+            for run in sorted(root.glob("p=*/run_*")):  # and an earlier thin killed part-way
+                settle_ahead(run, root)
+            with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
+                reseal_files(root, read_manifest(root), [path for path, _ in plans])
+    finally:
+        sampling.release()
 
 
 __all__ = ["HISTORY_GLOB", "ThinReport", "thin_histories", "thinned_history"]

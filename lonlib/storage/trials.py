@@ -62,8 +62,8 @@ def save_step(
         written[path.name] = buffer.getvalue()
         atomic_write(path, written[path.name])
     table = parquet_bytes(trials_frame(p, run, trials))
+    append_trial(run_dir(root, p, run), Path(root), table, written)  # sealed ahead of its row
     atomic_write(trials_path(root, p, run), table)
-    append_trial(run_dir(root, p, run), Path(root), table, written)  # after the commit point
 
 
 def trials_frame(p: float, run: int, trials: list[Trial]) -> pd.DataFrame:

@@ -247,7 +247,7 @@ def run():
 results = {}
 mount("-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(mount_point))
 results["read_only"] = run()
-mount("-o", "remount,rw,size=48k", str(mount_point))  # room for about one local search
+mount("-o", "remount,rw,size=64k", str(mount_point))  # room for about one local search
 results["full"] = run()
 shutil.copytree(mount_point / "exp", host / "full")
 mount("-o", "remount,size=16m", str(mount_point))  # space freed

@@ -176,7 +176,7 @@ def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, c
     report = verify_experiment(copy, recordings=False)
     assert report.ok and not report.sealed
     assert any("unsealed" in str(f) for f in report.warnings)
-    cli_main(["verify", "--no-recordings", "--seal", str(copy)])
+    cli_main(["verify", "--seal", str(copy)])
     assert "sealed:" in capsys.readouterr().out
     assert verify_experiment(copy, recordings=False).findings == []
     with warnings.catch_warnings():
@@ -263,7 +263,7 @@ def test_a_sigkill_at_each_write_resumes_and_verifies_never_tampered(small, tmp_
     assert done.returncode == -signal.SIGKILL, done.stderr[-2000:]
     if (out / "manifest.json").exists():  # what the kill left reads as pending, never tampered
         check = check_experiment_seal(out, read_manifest(out))
-        assert check.ok, check.problems
+        assert check.sealed and check.ok, check.problems
     run_experiment(load_config(yaml_path), out, progress=False)
     for run in range(2):
         assert_frame_equal_bits(trials_path(out, P, run), trials_path(expected, P, run))
@@ -331,3 +331,78 @@ def test_a_deleted_root_seal_of_a_sealed_experiment_is_named_not_unsealed(small,
     assert any("seal.json: missing, while 2 run(s)" in e for e in findings(copy))
     with pytest.raises(TamperedDataError, match="seal.json"):
         load_experiment(copy)
+
+
+def test_a_row_appended_by_hand_is_named_and_refused(small, copy):
+    rewrite_table(copy, 0, lambda t: pd.concat([t, t.iloc[[-1]].assign(index=len(t))]))
+    assert_caught(copy, "run_0000/trials.parquet", small[0])
+
+
+def test_a_run_added_by_hand_is_named(small, copy):
+    shutil.copytree(run_dir(copy, P, 1), run_dir(copy, P, 2))
+    (run_dir(copy, P, 2) / RUN_DIGESTS).unlink()
+    assert any("run_0002/trials.parquet" in e for e in findings(copy))
+
+
+def test_a_temporary_or_stray_file_in_a_run_is_no_crash(small, copy):
+    folder = run_dir(copy, P, 0)
+    (folder / ".optimum_0002.npz.x1y2.tmp").write_bytes(b"half")
+    (folder / "history_0001.parquet.bak").write_bytes(b"copy")
+    assert verify_experiment(copy, recordings=False).errors == []
+    load_experiment(copy)
+
+
+@pytest.mark.parametrize(
+    "shape",
+    [{"runs": []}, {"runs": {"p=0.001/run_0000": 3}}, {"recordings": {"a.rrd": 1}}],
+    ids=["runs a list", "a run an int", "a recording an int"],
+)
+def test_a_malformed_seal_is_one_line_naming_it(small, copy, shape):
+    seal = json.loads((copy / SEAL_NAME).read_text())
+    (copy / SEAL_NAME).write_text(json.dumps({**seal, **shape}))
+    with pytest.raises(TamperedDataError, match="seal.json: not a well-formed seal"):
+        load_experiment(copy)
+    assert any("seal.json" in e for e in findings(copy))
+
+
+def test_a_malformed_run_digests_is_one_line_naming_it(small, copy):
+    (run_dir(copy, P, 0) / RUN_DIGESTS).write_text('{"format": 1, "trials": "x"}')
+    with pytest.raises(TamperedDataError, match="digests.json: not a well-formed seal"):
+        load_experiment(copy)
+
+
+def test_sealing_without_replaying_the_recordings_is_refused(small, copy, capsys):
+    (copy / SEAL_NAME).unlink()
+    with pytest.raises(SystemExit):
+        cli_main(["verify", "--no-recordings", "--seal", str(copy)])
+    assert "without --no-recordings" in capsys.readouterr().err
+
+
+def test_an_experiment_whose_manifest_is_gone_does_not_verify(small, copy):
+    (copy / "manifest.json").unlink()
+    with pytest.raises(SystemExit):
+        cli_main(["verify", str(copy)])
+    with pytest.raises(ValueError, match="experiment's folder"):
+        seal_files(copy)
+
+
+def test_thin_refuses_a_linked_run_folder(small, copy, tmp_path):
+    elsewhere = tmp_path / "elsewhere"
+    shutil.move(run_dir(copy, P, 0), elsewhere)
+    run_dir(copy, P, 0).symlink_to(elsewhere)
+    with pytest.raises(Exception, match="symbolic link"):
+        thin_histories(copy)
+
+
+def test_a_thin_killed_part_way_is_accepted_and_completed_by_the_next(small, copy):
+    from lonlib.storage.digests import bytes_digest, seal_ahead
+
+    path = sorted(copy.glob("p=*/run_*/history_*.parquet"))[0]
+    table = pd.read_parquet(path)
+    new = table.iloc[-1:].to_parquet(index=False)
+    seal_ahead(copy, {path: bytes_digest(new)})
+    path.write_bytes(new)  # killed here: rewritten, not yet resealed
+    assert check_experiment_seal(copy, read_manifest(copy)).ok
+    thin_histories(copy)
+    assert verify_experiment(copy, recordings=False).findings == []
+    assert "next" not in (path.parent / RUN_DIGESTS).read_text()
