@@ -888,6 +888,34 @@ NUMBERS = [
     ),
     Number(
         "docs/study-geometry.md",
+        "| (ii) intermediate slack | {} of {} (first non-zero at {}–{} env steps) | {:.4f} "
+        "({:.3f}) | {:.4f} | {} of {} | – | {} |",
+        lambda: (
+            left_zero(cell("geometry-mid")),
+            len(cell("geometry-mid")),
+            kilo(cell("geometry-mid")["first_nonzero_steps"].min()),
+            kilo(cell("geometry-mid")["first_nonzero_steps"].max()),
+            cell("geometry-mid")["best_all"].max(),
+            cell("geometry-mid")["best_all"].median(),
+            cell("geometry-mid")["best_mean"].max(),
+            int(cell("geometry-mid")["first_090_all_steps"].notna().sum()),
+            len(cell("geometry-mid")),
+            behaviour_counts(cell("geometry-mid")["behaviour"]),
+        ),
+    ),
+    Number(
+        "docs/study-geometry.md",
+        "Cell (ii), with {:.1f} m of slack between the two, does not balance either (best "
+        "{:.4f}, every search spinning both rods)",
+        lambda: (
+            (env := load_calibration(ROOT / "configs/study-geometry-mid.yaml").env).tether_length
+            - env.initial_spacing
+            - env.cart_width,
+            cell("geometry-mid")["best_all"].max(),
+        ),
+    ),
+    Number(
+        "docs/study-geometry.md",
         "| (iv) upright start at (i) | {} of {} (judged > 0 from the first judgement, {} env "
         "steps) | {:.3f} ({:.3f}); the {:.3f} is a first judged policy, before training | "
         "{:.3f} | {} of {} | – | {} |",
