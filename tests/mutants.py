@@ -51,6 +51,7 @@ BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
+DIGESTS, TRIALS = "lonlib/storage/digests.py", "lonlib/storage/trials.py"
 JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
 ONE_ROLLOUT = [
@@ -128,9 +129,48 @@ GUARDS = {
     HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
     POWER: ["tests/analysis/test_claims_power.py"],
     KERNELS: ["tests/task/test_compiled_rollout.py"],
+    DIGESTS: ["tests/storage/test_digests.py"],
+    TRIALS: ["tests/storage/test_digests.py"],
 }
 
 MUTANTS = [
+    # --- digests: each line below is what makes one kind of change visible
+    Mutant(
+        DIGESTS,
+        'if len(entries) < count or entries[count - 1]["chain"] != head:',
+        "if len(entries) < count:",
+        "the root's chain head is not compared (a run rewritten to its count passes)",
+    ),
+    Mutant(
+        DIGESTS,
+        "    if len(rows) > len(entries):",
+        "    if False:",
+        "a row appended by hand is not named",
+    ),
+    Mutant(
+        DIGESTS,
+        "elif file_digest(path) not in accepted:",
+        "elif False:",
+        "a changed optimum or history passes",
+    ),
+    Mutant(
+        DIGESTS,
+        'if config_digest(manifest) not in (seal.get("config"), seal.get("config_next")):',
+        "if False:",
+        "an edited setting passes",
+    ),
+    Mutant(
+        DIGESTS,
+        'if file_digest(folder / name) != listed[name].get("sha256"):',
+        "if False:",
+        "a changed recording passes",
+    ),
+    Mutant(
+        TRIALS,
+        'fitness = float(table["fitness"].iloc[state.incumbent_index])',
+        "fitness = float(stored.fitness)",
+        "the incumbent on resume takes the optimum file's copy of f*",
+    ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
     Mutant(

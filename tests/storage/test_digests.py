@@ -35,7 +35,7 @@ from lonlib.storage.digests import (
 from lonlib.storage.layout import optimum_path, read_manifest, run_dir, trials_path
 from lonlib.storage.thin import thin_histories
 from lonlib.storage.trials import load_run_state
-from tests.conftest import write_tiny_yaml
+from tests.conftest import reseal, write_tiny_yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = [ROOT / "data" / "reference", ROOT / "data" / "one-cart"]
@@ -159,11 +159,15 @@ def test_a_removed_run_and_an_edited_setting_are_named(small, copy):
     assert any("run_0001/trials.parquet" in e for e in findings(copy))
 
 
-def test_the_incumbent_on_resume_is_the_tables_fitness(small):
-    _, out = small
+def test_the_incumbent_on_resume_is_the_tables_fitness(small, copy):
+    """Not the optimum file's second copy: with that copy changed (and the folder resealed,
+    so only this rule can tell them apart), f* is still the table's."""
     config = load_config(small[0]).basin_hopping(P)
-    state = load_run_state(out, P, 0, config)
-    table = pd.read_parquet(trials_path(out, P, 0))
+    incumbent = load_run_state(copy, P, 0, config).incumbent_index
+    rewrite_optimum(copy, 0, incumbent, plus("fitness", 0.25))
+    reseal(copy)
+    state = load_run_state(copy, P, 0, config)
+    table = pd.read_parquet(trials_path(copy, P, 0))
     assert state.incumbent.fitness == table["fitness"].iloc[state.incumbent_index]
 
 
