@@ -48,19 +48,29 @@ class StoredPolicy:
         return actions[0] if np.ndim(observation) == 1 else actions
 
 
-def load_policy(folder: str | Path, p: float, run: int, index: int) -> StoredPolicy:
+def load_policy(
+    folder: str | Path, p: float, run: int, index: int, check_seal: bool = True
+) -> StoredPolicy:
     """Local search ``index`` of run ``run`` at perturbation strength ``p`` of the stored
-    experiment ``folder``, as a :class:`StoredPolicy` (ValueError naming the file when it is
-    not stored)."""
+    experiment ``folder``, as a :class:`StoredPolicy` whose fitness is the trials table's
+    (ValueError naming the file when it is not stored). With ``check_seal``, data that no
+    longer match the folder's seal are refused first (:mod:`lonlib.storage.digests`)."""
+    from lonlib.storage.digests import check_readable
+    from lonlib.storage.layout import read_manifest, trials_path
+    from lonlib.storage.trials import read_trials
+
     root = Path(folder)
+    if check_seal:
+        check_readable(root, read_manifest(root), "load_policy")
     config = stored_config(root)
     path = optimum_path(root, p, run, index)
     if not path.is_file():
         raise ValueError(f"{path}: no stored Actor (is p={p!r}, run={run}, index={index} right?)")
     optimum = read_optimum(path)
+    table = read_trials(trials_path(root, p, run))
     return StoredPolicy(
         theta=np.asarray(optimum.theta),
-        fitness=float(optimum.fitness),
+        fitness=float(table["fitness"].iloc[index]),
         env=dataclasses.asdict(config.env),
         eval_seed=int(config.ddpg.eval_seed),
     )
@@ -90,13 +100,16 @@ def gymnasium_mismatches(folder: str | Path) -> tuple[int, list[str]]:
     """Replay every accepted optimum of ``folder`` through ``gymnasium.make`` with float64
     observations (:func:`gymnasium_fitness`): how many, and one line per optimum whose
     episode's fitness is not its stored fitness, bit for bit."""
+    from lonlib.storage.digests import check_readable
+    from lonlib.storage.layout import read_manifest
     from lonlib.storage.trials import read_experiment_trials
 
+    check_readable(Path(folder), read_manifest(Path(folder)), "verify --gymnasium")
     trials = read_experiment_trials(Path(folder))
     accepted = trials[trials["accepted"].astype(bool)]
     mismatches = []
     for row in accepted.itertuples():
-        policy = load_policy(folder, row.p, int(row.run), int(row.index))
+        policy = load_policy(folder, row.p, int(row.run), int(row.index), check_seal=False)
         replayed = gymnasium_fitness(policy)
         if replayed != policy.fitness:
             mismatches.append(

@@ -410,3 +410,14 @@ def test_a_thin_killed_part_way_is_accepted_and_completed_by_the_next(small, cop
     thin_histories(copy)
     assert verify_experiment(copy, recordings=False).findings == []
     assert "next" not in (path.parent / RUN_DIGESTS).read_text()
+
+
+def test_a_stored_policy_checks_the_seal_and_carries_the_tables_fitness(small, copy):
+    from lonlib.storage import load_policy
+
+    rewrite_optimum(copy, 0, 1, plus("fitness", 0.25))
+    with pytest.raises(TamperedDataError, match="optimum_0001.npz"):
+        load_policy(copy, P, 0, 1)
+    reseal(copy)
+    table = pd.read_parquet(trials_path(copy, P, 0))
+    assert load_policy(copy, P, 0, 1).fitness == table["fitness"].iloc[1]
