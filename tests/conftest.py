@@ -114,3 +114,22 @@ def reseal(folder: Path) -> Path:
     figures = sorted(p for p in (folder / "figures").glob("*") if p.is_file())
     reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
     return folder
+
+
+def sample_small(folder: Path, p: float, searches: int, name: str) -> tuple[object, Path, Path]:
+    """The tiny experiment at one ``p``, two runs of ``searches`` 60-step local searches,
+    its YAML written as ``folder/<name>.yaml`` and sampled uninterrupted into ``folder/out``:
+    (config, YAML path, output folder)."""
+    import dataclasses
+
+    import yaml
+
+    from lonlib.config import load_config
+    from lonlib.experiment.running import run_experiment
+
+    tiny = load_config(write_tiny_yaml(folder, max_steps=60))
+    config = dataclasses.replace(tiny, perturbations=(p,), max_local_searches=searches)
+    path = folder / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(config.to_dict()))
+    run_experiment(config, folder / "out", progress=False)
+    return config, path, folder / "out"

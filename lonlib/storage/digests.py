@@ -141,6 +141,12 @@ def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, A
     return out
 
 
+def _write_run(folder: Path, root: Path, entries: Iterable[Mapping[str, Any]]) -> None:
+    """Write a run's ``digests.json``: ``entries`` chained from the run's start."""
+    payload = {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
+    _write(folder / RUN_DIGESTS, payload)
+
+
 def settle_ahead(run_folder: Path, root: Path) -> None:
     """Make a rewrite sealed ahead (``next``, :func:`seal_ahead`) the seal where the file now
     holds it, and forget the rest (a ``lonlib thin`` killed part-way, completed)."""
@@ -155,8 +161,7 @@ def settle_ahead(run_folder: Path, root: Path) -> None:
             file = Path(run_folder) / name
             if file.is_file() and file_digest(file) == digest:
                 entry["files"][name] = digest
-    key = _run_key(Path(run_folder), Path(root))
-    _write(path, {"format": SEAL_FORMAT, "trials": _chained(key, entries)})
+    _write_run(Path(run_folder), Path(root), entries)
 
 
 def _write(path: Path, payload: Mapping[str, Any]) -> None:
@@ -245,7 +250,6 @@ def append_trial(
     if not is_sealed(root):
         return
     path = run_folder / RUN_DIGESTS
-    key = _run_key(run_folder, root)
     entries = _read(path)["trials"] if path.exists() else []
     rows = table_row_digests(table_bytes)
     index = len(rows) - 1
@@ -257,7 +261,7 @@ def append_trial(
         )
     files_part = {name: bytes_digest(data) for name, data in sorted(files.items())}
     entries.append({"index": index, "row": rows[index], "files": files_part})
-    _write(path, {"format": SEAL_FORMAT, "trials": _chained(key, entries)})
+    _write_run(run_folder, root, entries)
 
 
 def _run_folders(root: Path) -> list[Path]:
@@ -346,8 +350,7 @@ def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
             entries.append(
                 {"index": index, "row": row, "files": {n: file_digest(folder / n) for n in names}}
             )
-        payload = {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
-        _write(folder / RUN_DIGESTS, payload)
+        _write_run(folder, root, entries)
     write_root(root, manifest)
 
 
@@ -368,7 +371,7 @@ def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
             ahead = {n: d for n, d in names.items() if n in entry["files"]}
             if ahead:
                 entry["next"] = {**entry.get("next", {}), **ahead}
-        _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)})
+        _write_run(folder, root, entries)
 
 
 def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path]) -> None:
@@ -387,9 +390,7 @@ def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path])
         for entry in entries:
             entry["files"] = {n: names.get(n, d) for n, d in entry["files"].items()}
             entry.pop("next", None)
-        _write(
-            digests, {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
-        )
+        _write_run(folder, root, entries)
     write_root(root, manifest)
 
 
@@ -747,7 +748,7 @@ def drop_unwritten_trials(run_folder: Path, root: Path) -> int:
     if len(entries) <= rows:
         return 0
     kept = entries[:rows]
-    _write(path, {"format": SEAL_FORMAT, "trials": _chained(_run_key(run_folder, root), kept)})
+    _write_run(run_folder, root, kept)
     return len(entries) - rows
 
 

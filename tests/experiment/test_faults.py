@@ -23,13 +23,12 @@ import pytest
 import yaml
 
 import lonlib
-from lonlib.config import load_config
 from lonlib.experiment.running import check_worker_sees_folder, run_experiment, status
 from lonlib.storage.atomic import CorruptDataError, DataWriteError, read_json
 from lonlib.storage.layout import optimum_path, run_dir, trials_path
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import load_run_state, read_experiment_trials, read_optimum
-from tests.conftest import write_tiny_yaml
+from tests.conftest import sample_small
 
 COMPARED = ["p", "run", "index", "parent", "fitness", "accepted", "env_steps"]
 P = 1e-3
@@ -39,13 +38,7 @@ SEARCHES = 3  # local searches per run
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     """One p, two runs of three 60-step local searches, uninterrupted: (config, YAML, out)."""
-    folder = tmp_path_factory.mktemp("faults")
-    tiny = load_config(write_tiny_yaml(folder, max_steps=60))
-    config = dataclasses.replace(tiny, perturbations=(P,), max_local_searches=SEARCHES)
-    path = folder / "faults.yaml"
-    path.write_text(yaml.safe_dump(config.to_dict()))
-    run_experiment(config, folder / "out", progress=False)
-    return config, path, folder / "out"
+    return sample_small(tmp_path_factory.mktemp("faults"), P, SEARCHES, "faults")
 
 
 def data_files(out: Path) -> dict[Path, bytes]:

@@ -2,7 +2,6 @@
 ``lonlib verify`` and refused by its readers; an interrupted write never reads as tampered;
 the committed folders are sealed and match their seals."""
 
-import dataclasses
 import io
 import json
 import os
@@ -16,7 +15,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
 
 from lonlib.analysis.pipeline import load_experiment
 from lonlib.analysis.verify import verify_experiment
@@ -35,7 +33,7 @@ from lonlib.storage.digests import (
 from lonlib.storage.layout import optimum_path, read_manifest, run_dir, trials_path
 from lonlib.storage.thin import thin_histories
 from lonlib.storage.trials import load_run_state
-from tests.conftest import reseal, write_tiny_yaml
+from tests.conftest import reseal, sample_small
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = [ROOT / "data" / "reference", ROOT / "data" / "one-cart"]
@@ -45,13 +43,8 @@ P, SEARCHES = 1e-3, 3
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     """One p, two runs of three 60-step searches, uninterrupted: (YAML path, folder)."""
-    folder = tmp_path_factory.mktemp("digests")
-    tiny = load_config(write_tiny_yaml(folder, max_steps=60))
-    config = dataclasses.replace(tiny, perturbations=(P,), max_local_searches=SEARCHES)
-    path = folder / "small.yaml"
-    path.write_text(yaml.safe_dump(config.to_dict()))
-    run_experiment(config, folder / "out", progress=False)
-    return path, folder / "out"
+    _, path, out = sample_small(tmp_path_factory.mktemp("digests"), P, SEARCHES, "small")
+    return path, out
 
 
 @pytest.fixture
