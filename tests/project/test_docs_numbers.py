@@ -228,9 +228,14 @@ def proximity_span(name: str) -> float:
     return env.tether_length - env.cart_width
 
 
-def cell(name: str, suffix: str = "height") -> pd.DataFrame:
+def cell(name: str, suffix: str = "height", motor: str = "velocity-tau0.02") -> pd.DataFrame:
     searches = study(name)[0]
-    return searches[searches["cell"] == f"velocity-tau0.02_semi-implicit_{suffix}"]
+    return searches[searches["cell"] == f"{motor}_semi-implicit_{suffix}"]
+
+
+def slow_motor() -> pd.DataFrame:
+    """Cell (iii)'s searches: the velocity motor at ``motor_gain`` 0.5, today's slack."""
+    return cell("geometry-slow-motor", motor="velocity-tau0.02-gain0.5")
 
 
 def swing_up_cells(name: str) -> pd.DataFrame:
@@ -912,6 +917,34 @@ NUMBERS = [
             - env.initial_spacing
             - env.cart_width,
             cell("geometry-mid")["best_all"].max(),
+        ),
+    ),
+    Number(
+        "docs/study-geometry.md",
+        "| (iii) slower motor | {} of {} (first non-zero at {}–{} env steps) | {:.4f} "
+        "({:.3f}) | {:.4f} | {} of {} | – | {} |",
+        lambda: (
+            left_zero(slow_motor()),
+            len(slow_motor()),
+            kilo(slow_motor()["first_nonzero_steps"].min()),
+            kilo(slow_motor()["first_nonzero_steps"].max()),
+            slow_motor()["best_all"].max(),
+            slow_motor()["best_all"].median(),
+            slow_motor()["best_mean"].max(),
+            int(slow_motor()["first_090_all_steps"].notna().sum()),
+            len(slow_motor()),
+            behaviour_counts(slow_motor()["behaviour"]),
+        ),
+    ),
+    Number(
+        "docs/study-geometry.md",
+        "Cell (iii), the velocity motor at `motor_gain` {:g} instead of {:g}, does not balance "
+        "either (best {:.4f}; {})",
+        lambda: (
+            load_calibration(ROOT / "configs/study-geometry-slow-motor.yaml").cells[0].motor_gain,
+            PendulumConfig().motor_gain,
+            slow_motor()["best_all"].max(),
+            behaviour_counts(slow_motor()["behaviour"]),
         ),
     ),
     Number(
