@@ -132,6 +132,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
         check_memory,
         concurrent_searches,
         search_memory_bytes,
+        task_sizes,
     )
     from lonlib.experiment.executors import resolve_executor, session_executor
     from lonlib.experiment.lockstep import check_drain, check_lockstep
@@ -173,7 +174,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
         where += f", {slots} slots on {config.ddpg.device}"
     if args.drain_after is not None:
         where += f", draining after {args.drain_after:g} minutes"
-    need = searches * search_memory_bytes(config.env, config.ddpg) / 2**30
+    need = searches * search_memory_bytes(task_sizes(config), config.ddpg) / 2**30
     where += f"; about {need:.2g} GiB for {searches} search(es) at once"
     print(
         f"dry run: {config.name}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
@@ -269,10 +270,12 @@ def _analyse(args: argparse.Namespace) -> None:
         bins=args.bins,
         close_figures=True,
     )
-    verdicts = result.claims[["claim", "verdict", "evidence"]]
     with pd.option_context("display.width", 200, "display.max_colwidth", 120):
-        print(result.summary.drop(columns="behaviours").to_string(index=False))
-        print(verdicts.to_string(index=False))
+        print(result.summary.drop(columns="behaviours", errors="ignore").to_string(index=False))
+        if not result.claims.empty:
+            print(result.claims[["claim", "verdict", "evidence"]].to_string(index=False))
+    if result.skipped:
+        print(result.skipped)
     print(f"{len(result.files)} figures and tables written to {Path(args.dir) / 'figures'}")
     if readme is not None:
         text = splice_readme(

@@ -99,6 +99,7 @@ class Analysis:
     claims_side_by_side: pd.DataFrame = field(default_factory=pd.DataFrame)  # nominal | robust
     interactive: dict[str, Any] = field(default_factory=dict)
     holding: pd.DataFrame = field(default_factory=pd.DataFrame)  # the optima that hold their rods
+    skipped: str = ""  # what does not apply to the experiment's task, in one line
 
 
 def analyse(
@@ -143,6 +144,9 @@ def analyse(
         if close_figures:
             plt.close(fig)
 
+    pendulums = experiment.config.task is None
+    if not pendulums:
+        result.skipped = GENERIC_TASK_SKIPS
     save("fig2_optima_boxplot", optima_boxplot(trials))
     labelled = "label" in trials
     metric_rows, peak_rows, behavioural_rows = [], [], []
@@ -176,7 +180,8 @@ def analyse(
         if labelled:
             behavioural_rows.append({"p": p, **lon_metrics(behavioural_lon(graph))})
         for what, values in (("sinks", sink_fitness), ("optima", optima_fitness)):
-            table = compare_with_paper(detect_peaks(values, bins=bins))
+            table = detect_peaks(values, bins=bins)
+            table = compare_with_paper(table) if pendulums else table
             peak_rows.append(table.assign(p=p, histogram=what))
     result.metrics = pd.DataFrame(metric_rows)
     result.peaks = pd.concat(peak_rows, ignore_index=True)
@@ -191,6 +196,9 @@ def analyse(
         path = out / f"{name}.csv"
         table.to_csv(path, index=False)
         result.files.append(path)
+    if not pendulums:
+        reseal_outputs(folder, figures=result.files)
+        return result
     result.claims = claims_of_landscapes(experiment.landscapes, bins)
     result.claim_peaks = peaks_of_landscapes(experiment.landscapes, bins)
     result.claim_d_curve = claim_d_curve(trials)
@@ -209,6 +217,12 @@ def analyse(
         _conditioning(experiment, result, save, out, bins)
     reseal_outputs(folder, figures=result.files)
     return result
+
+
+GENERIC_TASK_SKIPS = (
+    "skipped (they concern the coupled pendulums): the paper's claims a-e and its peaks, "
+    "the conditioning and holding of optima, pendulum behaviour labels"
+)
 
 
 def _conditioning(

@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 
 from lonlib.analysis.recordings import recordings_index
-from lonlib.search.algorithm import RunState, Trial, random_parameters, search_start
+from lonlib.search.algorithm import RunState, Trial, random_networks, search_start
 from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.digests import (
     FIGURES_FOLDER,
@@ -58,7 +58,8 @@ from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.result_path import KNOWN_RESULT_PATH_VERSIONS, RESULT_PATH_VERSION
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
-from lonlib.task.policy import actor_spec
+from lonlib.task.interface import task_of
+from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.task.rollout import score_actors
 
 __all__ = [
@@ -246,6 +247,9 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     report.findings.extend(seal_findings(seal))
     # Algorithm 2's bookkeeping does not depend on the result path: always an error
     report.findings.extend(algorithm_findings(config, trials))
+    if config.task is not None:
+        _verify_task_trials(folder, config, trials, report, mismatch)
+        return report
     thetas, rows = _stored_actors(folder, trials, config, report, mismatch)
     scoring = config.ddpg.scoring
     replayed: dict[tuple[float, int, int], BehaviourDescriptor] = {}
@@ -260,6 +264,91 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     if recordings:
         _check_recordings(folder, trials, replayed, report, mismatch)
     return report
+
+
+TASK_REPLAY_TOLERANCE = 1e-9
+"""How far a Gymnasium task's replayed fitness may be from the stored one where the replay
+need not be exact (another CPU capability or Gymnasium version than the sampling's): the
+environment's own float arithmetic is not lonlib's to define, and a chaotic episode may move
+further (then a warning, not an error)."""
+
+
+def task_replays_exactly(folder: Path) -> bool:
+    """Must a Gymnasium task's greedy episodes replay bit for bit here? Yes when every
+    session recorded this machine's numpy CPU dispatch and the manifest this Gymnasium
+    version (the environment's arithmetic is numpy's, in Gymnasium's code)."""
+    import gymnasium
+
+    from lonlib.util.cpu_kernels import cpu_record
+
+    manifest = read_manifest(folder)
+    here = cpu_record(None).get("numpy")
+    same_cpu = all((s.get("cpu") or {}).get("numpy") == here for s in manifest.get("sessions", []))
+    return same_cpu and (manifest.get("versions") or {}).get("gymnasium") == gymnasium.__version__
+
+
+def _verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, mismatch) -> None:
+    """A Gymnasium task's trials: every stored Actor's greedy episode replayed
+    (:meth:`lonlib.task.gymnasium_task.GymnasiumTask.fitness`) and every start rebuilt; exact
+    where :func:`task_replays_exactly`, else within :data:`TASK_REPLAY_TOLERANCE` (a
+    difference beyond it is then a warning)."""
+    task = task_of(config)
+    exact = task_replays_exactly(folder)
+    severity = mismatch if exact else "warning"
+    report.findings.append(
+        Finding(
+            "info",
+            "task",
+            None,
+            None,
+            None,
+            f"{task.name}: "
+            + (
+                "same CPU dispatch and Gymnasium version as the sampling: replayed bit for bit"
+                if exact
+                else "another CPU dispatch or Gymnasium version than the sampling: replayed "
+                f"within {TASK_REPLAY_TOLERANCE:g} (larger differences are warnings)"
+            ),
+        )
+    )
+
+    def differs(stored: float, replayed: float) -> bool:
+        if exact:
+            return not _same(stored, replayed)
+        return not (_number(stored) and abs(float(stored) - replayed) <= TASK_REPLAY_TOLERANCE)
+
+    thetas, rows = _stored_actors(
+        folder, trials, config, report, mismatch, task.actor_spec.n_params
+    )
+    for row, theta in zip(rows, thetas, strict=True):
+        replayed = float(task.fitness(theta[None])[0])
+        if differs(row["fitness"], replayed):
+            report.findings.append(
+                Finding(
+                    severity,
+                    "fitness",
+                    float(row["p"]),
+                    int(row["run"]),
+                    int(row["index"]),
+                    f"stored {row['fitness']!r}, its Actor scores {replayed!r}",
+                )
+            )
+        report.replayed += 1
+    for row, start in _rebuilt_starts(folder, config, trials, task.actor_spec.n_params):
+        replayed = float(task.fitness(start[None])[0])
+        if differs(row["start_fitness"], replayed):
+            report.findings.append(
+                Finding(
+                    severity,
+                    "start",
+                    float(row["p"]),
+                    int(row["run"]),
+                    int(row["index"]),
+                    f"stored start fitness {row['start_fitness']!r}, the rebuilt start "
+                    f"(parent {int(row['parent'])}) scores {replayed!r}",
+                )
+            )
+        report.starts += 1
 
 
 def seal_findings(seal: SealCheck) -> list[Finding]:
@@ -371,12 +460,18 @@ def algorithm_findings(config, trials: pd.DataFrame, severity: str = "error") ->
 
 
 def _stored_actors(
-    folder: Path, trials: pd.DataFrame, config, report: VerifyReport, mismatch: str
+    folder: Path,
+    trials: pd.DataFrame,
+    config,
+    report: VerifyReport,
+    mismatch: str,
+    size: int | None = None,
 ) -> tuple[list[np.ndarray], list[dict]]:
     """The stored Actors that can be replayed; a missing or unusable file is a finding
     naming it (an error on data of this result-path version, where every trial's Actor is
-    stored; a warning on older data, which kept accepted optima only)."""
-    size = actor_spec(config.env.n_carts).n_params
+    stored; a warning on older data, which kept accepted optima only). ``size``: the
+    Actor's parameter count (default: the pendulums' of ``config.env``)."""
+    size = actor_spec(config.env.n_carts).n_params if size is None else size
     thetas, rows = [], []
     for row in trials.to_dict("records"):
         p, run, index = float(row["p"]), int(row["run"]), int(row["index"])
@@ -474,41 +569,9 @@ def _check_starts(folder: Path, config, trials: pd.DataFrame, report, mismatch, 
     perturbed with the trial's stream) and check its score is the stored ``start_fitness``.
     A trial whose parent optimum is not stored, or that stored no start fitness (older
     data), is skipped."""
-    if "start_fitness" not in trials.columns:
-        return
-    n_carts = config.env.n_carts
-    size = actor_spec(n_carts).n_params
-    parents: dict[tuple[float, int, int], tuple[np.ndarray, np.ndarray] | None] = {}
-
-    def parent_parameters(p: float, run: int, parent: int):
-        """The stored parent's Actor and Critic, read once for all its children (None if
-        missing or damaged: the actor check names it)."""
-        key = (p, run, parent)
-        if key not in parents:
-            try:
-                stored = read_optimum(optimum_path(folder, p, run, parent))
-                parents[key] = (np.asarray(stored.theta), np.asarray(stored.omega))
-            except (OSError, CorruptDataError):
-                parents[key] = None
-        return parents[key]
-
-    starts, rows = [], []
-    for row in trials.to_dict("records"):
-        if not _number(row["start_fitness"]):
-            continue
-        p, run, parent = float(row["p"]), int(row["run"]), int(row["parent"])
-        run_seed = config.run_seed(p, run)
-        if parent >= 0:
-            incumbent, initial = parent_parameters(p, run, parent), None
-            if incumbent is None:
-                continue
-        else:
-            incumbent, initial = None, random_parameters(run_seed, n_carts)
-        theta = search_start(run_seed, int(row["index"]), p, incumbent, initial)[0]
-        if theta.shape != (size,) or not np.isfinite(theta).all():
-            continue  # the parent is unusable: the actor check names it
-        starts.append(theta)
-        rows.append(row)
+    rebuilt = _rebuilt_starts(folder, config, trials, actor_spec(config.env.n_carts).n_params)
+    rows = [row for row, _ in rebuilt]
+    starts = [theta for _, theta in rebuilt]
     scoring = config.ddpg.scoring
     for first in range(0, len(rows), batch):
         scores = score_actors(np.stack(starts[first : first + batch]), config.env, scoring)
@@ -526,6 +589,53 @@ def _check_starts(folder: Path, config, trials: pd.DataFrame, report, mismatch, 
                     )
                 )
         report.starts += len(rows[first : first + batch])
+
+
+def _rebuilt_starts(
+    folder: Path, config, trials: pd.DataFrame, size: int
+) -> list[tuple[dict, np.ndarray]]:
+    """``(trial row, start Actor)`` of every trial whose start can be rebuilt: the run's
+    random Actor, or the stored parent optimum perturbed with the trial's stream. A trial
+    whose parent optimum is not stored or unusable, or that stored no start fitness (older
+    data), is left out."""
+    if "start_fitness" not in trials.columns:
+        return []
+    if config.task is None:
+        specs = (actor_spec(config.env.n_carts), critic_spec(config.env.n_carts))
+    else:
+        task = task_of(config)
+        specs = (task.actor_spec, task.critic_spec)
+    parents: dict[tuple[float, int, int], tuple[np.ndarray, np.ndarray] | None] = {}
+
+    def parent_parameters(p: float, run: int, parent: int):
+        """The stored parent's Actor and Critic, read once for all its children (None if
+        missing or damaged: the actor check names it)."""
+        key = (p, run, parent)
+        if key not in parents:
+            try:
+                stored = read_optimum(optimum_path(folder, p, run, parent))
+                parents[key] = (np.asarray(stored.theta), np.asarray(stored.omega))
+            except (OSError, CorruptDataError):
+                parents[key] = None
+        return parents[key]
+
+    out: list[tuple[dict, np.ndarray]] = []
+    for row in trials.to_dict("records"):
+        if not _number(row["start_fitness"]):
+            continue
+        p, run, parent = float(row["p"]), int(row["run"]), int(row["parent"])
+        run_seed = config.run_seed(p, run)
+        if parent >= 0:
+            incumbent, initial = parent_parameters(p, run, parent), None
+            if incumbent is None:
+                continue
+        else:
+            incumbent, initial = None, random_networks(run_seed, *specs)
+        theta = search_start(run_seed, int(row["index"]), p, incumbent, initial)[0]
+        if theta.shape != (size,) or not np.isfinite(theta).all():
+            continue  # the parent is unusable: the actor check names it
+        out.append((row, theta))
+    return out
 
 
 def _check_recordings(folder, trials, replayed, report, mismatch) -> None:

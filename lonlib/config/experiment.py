@@ -19,6 +19,7 @@ from lonlib.config.ddpg import (
 )
 from lonlib.config.pendulum import PendulumConfig
 from lonlib.config.search import BasinHoppingConfig
+from lonlib.config.task import GymnasiumTaskConfig
 from lonlib.util.validation import (
     check_choice,
     check_field_types,
@@ -60,6 +61,9 @@ class ExperimentConfig:
     """Where runs execute (:data:`lonlib.experiment.executors.EXECUTORS`); not what they compute."""
     slots: int = 16
     """Local searches trained as one batch by the lockstep executor; not results."""
+    task: GymnasiumTaskConfig | None = None
+    """A Gymnasium environment as the task instead of the coupled pendulums (``env`` then
+    stays at its defaults and is not used); None: the coupled pendulums."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -88,6 +92,24 @@ class ExperimentConfig:
         if not isinstance(self.ddpg, DDPGConfig):
             raise ValueError(f"ddpg must be a DDPGConfig, got {self.ddpg!r}")
         check_judging(self.ddpg)
+        if self.task is not None:
+            if not isinstance(self.task, GymnasiumTaskConfig):
+                raise ValueError(f"task must be a GymnasiumTaskConfig, got {self.task!r}")
+            if self.env != PendulumConfig():
+                raise ValueError(
+                    "env: the coupled pendulums' physics does not apply to a Gymnasium task; "
+                    "remove env (or task)"
+                )
+            if self.executor == "lockstep":
+                raise ValueError(
+                    "executor: lockstep batches the coupled pendulums only; a Gymnasium task "
+                    "runs with auto, serial, pool or dask"
+                )
+
+    @property
+    def is_pendulums(self) -> bool:
+        """Is the task the coupled pendulums (no ``task`` section)?"""
+        return self.task is None
 
     def basin_hopping(self, p: float) -> BasinHoppingConfig:
         """Algorithm 2's settings for perturbation strength ``p``."""
@@ -97,6 +119,10 @@ class ExperimentConfig:
         """Plain mapping (YAML/JSON friendly) that :meth:`from_mapping` reads back."""
         out = dataclasses.asdict(self)
         out["perturbations"] = list(self.perturbations)
+        if self.task is None:  # the pendulums' stored form (and digests) stay as they were
+            out.pop("task")
+        else:
+            out["task"] = self.task.to_dict()
         return out
 
     @classmethod
@@ -112,6 +138,8 @@ class ExperimentConfig:
         given = sorted(set(values) - {"name"})
         env = {**start.pop("env"), **_mapping("env", values.pop("env", None))}
         ddpg = {**start.pop("ddpg"), **_mapping("ddpg", values.pop("ddpg", None))}
+        task_values = values.pop("task", start.pop("task", None))
+        task = None if task_values is None else GymnasiumTaskConfig.from_mapping(task_values)
         merged = {**start, **values}
         if "note" not in values and given:
             merged["note"] = f"based on {base or 'the defaults'}, changed: {', '.join(given)}"
@@ -123,7 +151,9 @@ class ExperimentConfig:
             _as_float("perturbations", p) for p in merged["perturbations"]
         )
         check_keys("ddpg", ddpg, DDPGConfig)
-        return cls(env=PendulumConfig.from_mapping(env), ddpg=DDPGConfig(**ddpg), **merged)
+        return cls(
+            env=PendulumConfig.from_mapping(env), ddpg=DDPGConfig(**ddpg), task=task, **merged
+        )
 
     def run_seed(self, p: float, run: int) -> int:
         """Seed of run ``(p, run)``: a pure function of (experiment seed, p, run index)."""

@@ -11,9 +11,11 @@ import dataclasses
 
 import numpy as np
 
+from lonlib.ddpg.gymnasium_search import gymnasium_local_search
 from lonlib.ddpg.search import local_search
 from lonlib.search.algorithm import LocalOptimum, LocalSearch
 from lonlib.task.behaviour import describe_columns
+from lonlib.task.gymnasium_task import GymnasiumTask
 
 
 def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSearch:
@@ -24,6 +26,17 @@ def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSear
     def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
         result = local_search(theta, omega, env_config, hp, seed)
         return local_optimum(result, env_config, hp, describe_optima)
+
+    return search
+
+
+def gymnasium_ddpg_local_search(task: GymnasiumTask, hp) -> LocalSearch:
+    """``F`` on a Gymnasium task: lonlib's DDPG (:mod:`lonlib.ddpg.gymnasium_search`) bound
+    to the task and ``h``; optima carry no behaviour descriptor."""
+
+    def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
+        result = gymnasium_local_search(task, theta, omega, hp, seed)
+        return local_optimum(result, None, hp, describe_optima=False)
 
     return search
 

@@ -5,6 +5,7 @@ still load on a laptop)."""
 from __future__ import annotations
 
 from lonlib.config import DDPGConfig, ExperimentConfig, PendulumConfig
+from lonlib.experiment.runs import experiment_task
 
 FLOAT_BYTES = 4  # DDPG trains in float32
 INDEX_BYTES = 8  # a minibatch's sampled row indices (int64)
@@ -15,14 +16,24 @@ HEADROOM = 2.0
 it is gathered: the estimate times this must fit in the memory available."""
 
 
-def search_memory_bytes(env: PendulumConfig, hp: DDPGConfig) -> int:
+def search_memory_bytes(env: PendulumConfig | tuple[int, int], hp: DDPGConfig) -> int:
     """An estimate of one local search's working memory: its replay buffer (allocated whole,
     ``buffer_size`` transitions of ``2 * observation + action + 2`` floats,
     :mod:`lonlib.ddpg.replay`) and one minibatch (its transitions, their indices and the
-    networks' activations and gradients)."""
-    transition = (2 * env.observation_size + env.n_carts + 2) * FLOAT_BYTES
+    networks' activations and gradients). ``env``: the pendulums' physics, or a task's
+    ``(observation size, action size)``."""
+    obs, act = env if isinstance(env, tuple) else (env.observation_size, env.n_carts)
+    transition = (2 * obs + act + 2) * FLOAT_BYTES
     minibatch = transition + INDEX_BYTES + HIDDEN_UNITS * NETWORK_PASSES * FLOAT_BYTES
     return hp.buffer_size * transition + hp.batch_size * minibatch
+
+
+def task_sizes(config: ExperimentConfig) -> PendulumConfig | tuple[int, int]:
+    """What :func:`search_memory_bytes` reads of the experiment's task."""
+    if config.task is None:
+        return config.env
+    task = experiment_task(config)
+    return (task.obs_size, task.action_size)
 
 
 def concurrent_searches(
@@ -49,7 +60,7 @@ def check_memory(config: ExperimentConfig, searches: int, available: int | None 
     """MemoryError naming ``ddpg.buffer_size`` and ``ddpg.batch_size`` when ``searches``
     local searches at once need more than the memory available (``available``: bytes, by
     default the machine's now), before any folder is made."""
-    need = searches * search_memory_bytes(config.env, config.ddpg)
+    need = searches * search_memory_bytes(task_sizes(config), config.ddpg)
     have = available_memory_bytes() if available is None else available
     if need * HEADROOM > have:
         gib = 2**30

@@ -27,14 +27,22 @@ import pandas as pd
 from tqdm import tqdm
 
 from lonlib.config import ExperimentConfig
-from lonlib.ddpg.search_interface import ddpg_local_search
+from lonlib.ddpg.search_interface import ddpg_local_search, gymnasium_ddpg_local_search
 from lonlib.ddpg.trainer import check_device
 from lonlib.experiment.admission import check_memory, concurrent_searches
 from lonlib.experiment.checkpoints import remove_inflight
 from lonlib.experiment.executors import execute_runs, resolve_executor, session_executor
 from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_drain, check_lockstep, draining
 from lonlib.experiment.lockstep_workers import run_lockstep_processes
-from lonlib.experiment.runs import experiment_plan, hold_runs, open_run, run_lock_path, run_summary
+from lonlib.experiment.runs import (
+    experiment_plan,
+    experiment_task,
+    hold_runs,
+    open_run,
+    run_lock_path,
+    run_summary,
+)
+from lonlib.search.algorithm import LocalSearch
 from lonlib.storage.atomic import (
     DataWriteError,
     check_output_folder,
@@ -53,6 +61,7 @@ from lonlib.storage.trials import (
     read_experiment_trials,
     save_step,
 )
+from lonlib.task.gymnasium_task import TaskEnvironmentError
 from lonlib.util.cpu_kernels import CpuKernelWarning, torch_cpu_capability, unpinned_message
 from lonlib.util.progress import progress_bar
 from lonlib.util.validation import check_range
@@ -81,9 +90,30 @@ def run_one(
 
 def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict[str, Any]:
     driver = open_run(out, config, p, run)
-    for state, _, optimum in driver.steps(ddpg_local_search(config.env, config.ddpg)):
-        save_step(out, p, run, state.trials, optimum)
+    try:
+        for state, _, optimum in driver.steps(experiment_local_search(config)):
+            save_step(out, p, run, state.trials, optimum)
+    except TaskEnvironmentError as error:  # what the run stored before stays
+        done = len(driver.state.trials)
+        raise TaskEnvironmentError(
+            f"run (p={p:g}, run={run}), local search {done}: {error} (its {done} stored "
+            "local search(es) are kept)"
+        ) from None
     return run_summary(p, run, driver.state)
+
+
+def experiment_local_search(config: ExperimentConfig) -> LocalSearch:
+    """The experiment's ``F``: lonlib's DDPG on the coupled pendulums or on its Gymnasium
+    task (``task.search``; Stable-Baselines3's searches need the extra ``lonlib[sb3]``)."""
+    if config.task is None:
+        return ddpg_local_search(config.env, config.ddpg)
+    task = experiment_task(config)
+    if config.task.search == "ddpg":
+        return gymnasium_ddpg_local_search(task, config.ddpg)
+    raise NotImplementedError(
+        f"task.search {config.task.search!r}: Stable-Baselines3 local searches are not "
+        "available yet; use task.search: ddpg"
+    )
 
 
 # ---------------------------------------------------------------------------- experiments

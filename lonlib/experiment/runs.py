@@ -11,18 +11,40 @@ from typing import Any
 import numpy as np
 
 from lonlib.config import ExperimentConfig
-from lonlib.search.algorithm import BasinHoppingRun, RunState, random_parameters
+from lonlib.search.algorithm import (
+    BasinHoppingRun,
+    RunState,
+    random_networks,
+    random_parameters,
+)
 from lonlib.storage.atomic import remove_temporary_files
 from lonlib.storage.digests import drop_unwritten_trials
 from lonlib.storage.inflight import Plan
 from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import load_run_state
+from lonlib.task.interface import task_of
 
 
 def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np.ndarray, ...]:
     """Algorithm 2's random initial Actor and Critic for run ``(p, run)``."""
-    return random_parameters(config.run_seed(p, run), config.env.n_carts)
+    if config.task is None:
+        return random_parameters(config.run_seed(p, run), config.env.n_carts)
+    task = experiment_task(config)
+    return random_networks(config.run_seed(p, run), task.actor_spec, task.critic_spec)
+
+
+_TASKS: dict[Any, Any] = {}
+
+
+def experiment_task(config: ExperimentConfig) -> Any:
+    """The experiment's task (:func:`lonlib.task.task_of`), made once per process for a
+    Gymnasium task (making an environment can take a while)."""
+    if config.task is None:
+        return task_of(config)
+    if config.task not in _TASKS:
+        _TASKS[config.task] = task_of(config)
+    return _TASKS[config.task]
 
 
 def run_lock_path(out: Path, p: float, run: int) -> Path:

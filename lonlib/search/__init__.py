@@ -11,6 +11,7 @@ from lonlib.search.algorithm import (
     basin_hopping,
     basin_hopping_steps,
     perturb_parameters,
+    random_networks,
     random_parameters,
 )
 
@@ -25,5 +26,6 @@ __all__ = [
     "basin_hopping",
     "basin_hopping_steps",
     "perturb_parameters",
+    "random_networks",
     "random_parameters",
 ]

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lonlib.config import BasinHoppingConfig
-from lonlib.task.policy import actor_spec, critic_spec
+from lonlib.task.policy import NetSpec, actor_spec, critic_spec
 
 
 @dataclass(frozen=True)
@@ -150,8 +150,15 @@ def trial_seeds(run_seed: int, index: int) -> TrialSeeds:
 
 def random_parameters(run_seed: int, n_carts: int) -> tuple[np.ndarray, np.ndarray]:
     """Algorithm 2's random initial Actor and Critic of the run seeded ``run_seed``."""
+    return random_networks(run_seed, actor_spec(n_carts), critic_spec(n_carts))
+
+
+def random_networks(
+    run_seed: int, actor: NetSpec, critic: NetSpec
+) -> tuple[np.ndarray, np.ndarray]:
+    """Algorithm 2's random initial Actor and Critic of the shapes given (any task's)."""
     rng = np.random.default_rng([run_seed, 1])
-    return actor_spec(n_carts).initial(rng), critic_spec(n_carts).initial(rng)
+    return actor.initial(rng), critic.initial(rng)
 
 
 def search_start(

@@ -1,9 +1,13 @@
-"""The coupled inverted pendulums task: physics, Gymnasium env, reference controllers, the one
-rollout that scores every policy, and behaviour descriptors (numpy only, no torch)."""
+"""The tasks: the coupled inverted pendulums (physics, Gymnasium env, reference controllers, the
+one rollout that scores every policy, behaviour descriptors) and any Gymnasium environment
+with a continuous action space (:class:`GymnasiumTask`), behind one :class:`Task` interface
+(numpy only, no torch)."""
 
 from lonlib.task.behaviour import BehaviourDescriptor, as_policy, describe, label, relabel
 from lonlib.task.controllers import SwingUpBalanceController
 from lonlib.task.env import ENV_ID, CoupledPendulumEnv, register_envs
+from lonlib.task.gymnasium_task import GymnasiumTask, TaskEnvironmentError
+from lonlib.task.interface import PendulumTask, Task, task_of
 from lonlib.task.pendulum import CoupledPendulums, EndReason, Policy
 from lonlib.task.policy import actor_spec, critic_spec, forward_numpy
 from lonlib.task.rollout import (
@@ -23,10 +27,14 @@ __all__ = [
     "CoupledPendulums",
     "ENV_ID",
     "EndReason",
+    "GymnasiumTask",
+    "PendulumTask",
     "Policy",
     "Rollout",
     "Scores",
     "SwingUpBalanceController",
+    "Task",
+    "TaskEnvironmentError",
     "actor_spec",
     "as_policy",
     "critic_spec",
@@ -41,4 +49,5 @@ __all__ = [
     "run_actors",
     "run_policy",
     "score_actors",
+    "task_of",
 ]
