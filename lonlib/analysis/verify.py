@@ -76,7 +76,7 @@ __all__ = [
 class Finding:
     """One check that did not hold (or could not run) for one trial or recording."""
 
-    severity: str  # "error" or "warning"
+    severity: str  # "error", "warning" or "info" (what applied, e.g. exact or tolerant replay)
     check: str  # fitness, descriptor, label, consistency, actor, recording, version
     p: float | None
     run: int | None

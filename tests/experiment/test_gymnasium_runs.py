@@ -1,0 +1,97 @@
+"""A Gymnasium task through the public path: ``run_experiment`` samples it, ``verify``
+replays it, ``analyse`` draws what applies and says what it skips, and an environment that
+fails mid-run stops the run with its name while what was stored stays."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from lonlib.analysis import analyse
+from lonlib.analysis.verify import verify_experiment
+from lonlib.config import ExperimentConfig
+from lonlib.experiment import run_experiment
+from lonlib.storage.trials import read_experiment_trials
+from lonlib.task import TaskEnvironmentError
+from tests.task.test_gymnasium_task import Line  # registers lonlib-test/Line-v0
+
+
+def line_config(**task) -> ExperimentConfig:
+    return ExperimentConfig.from_mapping(
+        {
+            "name": "line",
+            "perturbations": [1e-3],
+            "runs": 2,
+            "tolerance": 1,
+            "max_local_searches": 3,
+            "task": {"gymnasium": "lonlib-test/Line-v0", "fitness_range": [-200, 0], **task},
+            "ddpg": {
+                "batch_size": 16,
+                "buffer_size": 200,
+                "warmup_steps": 20,
+                "max_steps": 60,
+                "min_steps": 0,
+                "patience_steps": 1000,
+            },
+        }
+    )
+
+
+def test_a_gymnasium_experiment_samples_verifies_and_analyses(tmp_path):
+    out = tmp_path / "line"
+    trials = run_experiment(line_config(), out, progress=False)
+    assert len(trials) >= 4 and trials["fitness"].between(0, 1).all()
+    assert not any(c.startswith("b_") for c in trials.columns)  # no pendulum descriptors
+    report = verify_experiment(out)
+    assert report.ok and report.replayed == len(trials) and report.starts == len(trials)
+    assert any(f.check == "task" and "bit for bit" in f.message for f in report.findings)
+    result = analyse(out, close_figures=True)
+    assert "the paper's claims a-e" in result.skipped and result.claims.empty
+    names = {p.name for p in result.files}
+    assert {"fig2_optima_boxplot.png", "fig3_lon_p=0.001.png", "metrics.csv"} <= names
+    assert not (out / "figures" / "claims.csv").exists()
+
+
+def test_a_stored_fitness_that_does_not_replay_is_an_error(tmp_path):
+    out = tmp_path / "line"
+    run_experiment(line_config(), out, progress=False)
+    # the same folder verified as another task: the Actors score differently there
+    import json
+
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest["config"]["task"]["fitness_range"] = [-100, 0]
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    from tests.conftest import reseal
+
+    reseal(out)
+    report = verify_experiment(out)
+    assert not report.ok and {f.check for f in report.errors} >= {"fitness", "start"}
+
+
+def test_a_run_is_the_same_serially_and_resumed(tmp_path):
+    config = line_config()
+    whole = run_experiment(config, tmp_path / "whole", progress=False)
+    part = dataclasses.replace(config, max_local_searches=1)
+    run_experiment(part, tmp_path / "part", progress=False)
+    resumed = run_experiment(
+        config, tmp_path / "part", progress=False, allow_changes=("max_local_searches",)
+    )
+    columns = ["p", "run", "index", "parent", "fitness", "accepted", "start_fitness"]
+    assert whole[columns].equals(resumed[columns])
+
+
+def test_an_environment_failing_mid_run_names_the_run_and_keeps_what_was_stored(
+    tmp_path, monkeypatch
+):
+    out = tmp_path / "line"
+    config = line_config()
+    run_experiment(dataclasses.replace(config, max_local_searches=1), out, progress=False)
+    before = read_experiment_trials(out)
+    # the runs continue in an environment that now fails at its third step
+    monkeypatch.setattr(Line, "FAULT", "raise")
+    with pytest.raises(TaskEnvironmentError) as error:
+        run_experiment(config, out, progress=False, allow_changes=("max_local_searches",))
+    text = str(error.value)
+    assert "run (p=0.001, run=0)" in text and "ValueError: contact solver diverged" in text
+    after = read_experiment_trials(out)
+    np.testing.assert_array_equal(after["fitness"], before["fitness"])
