@@ -8,6 +8,7 @@ the figures and tables derived here).
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,6 +52,7 @@ from lonlib.analysis.plots import (
     sensitivity,
 )
 from lonlib.analysis.recordings import record, recording_name, recordings_index
+from lonlib.analysis.task_recordings import record_task
 from lonlib.analysis.summary import experiment_summary
 from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
@@ -60,6 +62,7 @@ from lonlib.storage.digests import check_experiment_seal, is_sealed, reseal_outp
 from lonlib.storage.layout import optimum_path, read_manifest, stored_config
 from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
+from lonlib.task.interface import task_of
 from lonlib.util.figures import save_png
 from lonlib.util.labels import p_label
 from lonlib.util.validation import check_range
@@ -377,24 +380,25 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
     if limit:
         selection = selection.head(limit)
     paths = []
+    task = None if config.task is None else task_of(config)
     for row in selection.itertuples():
         optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
         behaviour = slug(row.behaviour) if row.behaviour else ""
         name = recording_name(row.p, int(row.run), row.fitness, role=row.role, behaviour=behaviour)
         path = folder / "recordings" / name
-        record(
-            optimum.theta,
-            config.env,
-            path,
-            title=f"{row.role} p={p_label(row.p)}",
-            scoring=config.ddpg.scoring,
-            properties={
-                "p": float(row.p),
-                "run": int(row.run),
-                "index": int(row.index),
-                "stored_fitness": float(row.fitness),
-            },
-        )
+        title = f"{row.role} p={p_label(row.p)}"
+        properties: dict[str, float | int | str] = {
+            "p": float(row.p),
+            "run": int(row.run),
+            "index": int(row.index),
+            "stored_fitness": float(row.fitness),
+        }
+        if task is None:
+            record(optimum.theta, config.env, path, title, config.ddpg.scoring, properties)
+        else:
+            _, no_frames = record_task(task, optimum.theta, path, title, properties)
+            if no_frames and not paths:
+                warnings.warn(f"recordings without frames: {no_frames}", stacklevel=2)
         paths.append(path)
     reseal_outputs(folder, recordings=recordings_index(folder))
     return paths

@@ -249,6 +249,8 @@ def verify_experiment(folder: str | Path, recordings: bool = True, batch: int = 
     report.findings.extend(algorithm_findings(config, trials))
     if config.task is not None:
         _verify_task_trials(folder, config, trials, report, mismatch)
+        if recordings:  # they show the trial's fitness; no descriptor to compare
+            _check_recordings(folder, trials, {}, report, mismatch)
         return report
     thetas, rows = _stored_actors(folder, trials, config, report, mismatch)
     scoring = config.ddpg.scoring

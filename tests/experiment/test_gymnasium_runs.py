@@ -52,6 +52,26 @@ def test_a_gymnasium_experiment_samples_verifies_and_analyses(tmp_path):
     assert not (out / "figures" / "claims.csv").exists()
 
 
+def test_recordings_show_the_scored_episode_with_frames_and_verify(tmp_path):
+    from lonlib.analysis import record_optima
+    from lonlib.analysis.recordings import recorded_entities, recording_properties
+
+    out = tmp_path / "line"
+    trials = run_experiment(line_config(), out, progress=False)
+    paths = record_optima(out)
+    assert paths
+    for path in paths:
+        props = recording_properties(path)
+        stored = trials.set_index(["p", "run", "index"]).loc[
+            (props["p"], props["run"], props["index"]), "fitness"
+        ]
+        assert props["fitness"] == stored and props["end_step"] == 20
+        entities = recorded_entities(path)
+        assert entities["/frames"] == 20 and entities["/actions"] == 20
+    report = verify_experiment(out)
+    assert report.ok and report.recordings == len(paths)
+
+
 def test_a_stored_fitness_that_does_not_replay_is_an_error(tmp_path):
     out = tmp_path / "line"
     run_experiment(line_config(), out, progress=False)

@@ -16,9 +16,12 @@ class Line(gymnasium.Env):
     step ``at``: raise, return NaN, or change its observation space."""
 
     FAULT = ""  # the fault of environments made without one (a test may set it)
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, fault: str = "", at: int = 3, discrete: bool = False):
-        self.fault, self.at = fault or Line.FAULT, at
+    def __init__(
+        self, fault: str = "", at: int = 3, discrete: bool = False, render_mode: str | None = None
+    ):
+        self.fault, self.at, self.render_mode = fault or Line.FAULT, at, render_mode
         self.observation_space = spaces.Box(-10.0, 10.0, (2,), np.float64)
         self.action_space = (
             spaces.Discrete(3) if discrete else spaces.Box(-1.0, 1.0, (1,), np.float32)
@@ -45,6 +48,12 @@ class Line(gymnasium.Env):
         if self.t == self.at and self.fault == "spaces":
             self.observation_space = spaces.Box(-10.0, 10.0, (3,), np.float64)
         return obs, reward, False, False, {}
+
+    def render(self):
+        """A 16 x 32 frame with the point drawn at its position."""
+        frame = np.zeros((16, 32, 3), dtype=np.uint8)
+        frame[:, int(np.clip(16 + self.x, 0, 31))] = 255
+        return frame
 
 
 gymnasium.register("lonlib-test/Line-v0", entry_point=Line, max_episode_steps=20)
