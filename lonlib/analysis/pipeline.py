@@ -52,8 +52,8 @@ from lonlib.analysis.plots import (
     sensitivity,
 )
 from lonlib.analysis.recordings import record, recording_name, recordings_index
-from lonlib.analysis.task_recordings import record_task
 from lonlib.analysis.summary import experiment_summary
+from lonlib.analysis.task_recordings import record_task
 from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
