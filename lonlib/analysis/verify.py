@@ -58,6 +58,7 @@ from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.result_path import KNOWN_RESULT_PATH_VERSIONS, RESULT_PATH_VERSION
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
+from lonlib.task.gymnasium_task import environment_versions
 from lonlib.task.interface import task_of
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.task.rollout import score_actors
@@ -275,18 +276,26 @@ environment's own float arithmetic is not lonlib's to define, and a chaotic epis
 further (then a warning, not an error)."""
 
 
-def task_replays_exactly(folder: Path) -> bool:
+def task_replays_exactly(folder: Path, config) -> bool:
     """Must a Gymnasium task's greedy episodes replay bit for bit here? Yes when every
-    session recorded this machine's numpy CPU dispatch and the manifest this Gymnasium
-    version (the environment's arithmetic is numpy's, in Gymnasium's code)."""
+    session recorded this machine's numpy CPU dispatch and this environment's source and
+    versions (:func:`lonlib.task.gymnasium_task.environment_versions`; sessions from before
+    it was recorded: the manifest's Gymnasium version)."""
     import gymnasium
 
     from lonlib.util.cpu_kernels import cpu_record
 
     manifest = read_manifest(folder)
+    sessions = manifest.get("sessions", [])
     here = cpu_record(None).get("numpy")
-    same_cpu = all((s.get("cpu") or {}).get("numpy") == here for s in manifest.get("sessions", []))
-    return same_cpu and (manifest.get("versions") or {}).get("gymnasium") == gymnasium.__version__
+    same_cpu = all((s.get("cpu") or {}).get("numpy") == here for s in sessions)
+    source = environment_versions(config.task)
+    same_source = all(
+        s.get("task_environment", {"gymnasium": (manifest.get("versions") or {}).get("gymnasium")})
+        in (source, {"gymnasium": gymnasium.__version__})
+        for s in sessions
+    )
+    return same_cpu and same_source
 
 
 def _verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, mismatch) -> None:
@@ -295,7 +304,7 @@ def _verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, mism
     where :func:`task_replays_exactly`, else within :data:`TASK_REPLAY_TOLERANCE` (a
     difference beyond it is then a warning)."""
     task = task_of(config)
-    exact = task_replays_exactly(folder)
+    exact = task_replays_exactly(folder, config)
     severity = mismatch if exact else "warning"
     report.findings.append(
         Finding(

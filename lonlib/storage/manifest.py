@@ -34,6 +34,7 @@ from lonlib.storage.atomic import read_json, write_json
 from lonlib.storage.layout import checked_manifest, config_of_manifest
 from lonlib.storage.result_path import RESULT_PATH_VERSION
 from lonlib.storage.trials import runs_ending_early
+from lonlib.task.gymnasium_task import environment_versions
 
 if TYPE_CHECKING:
     from lonlib.config import ExperimentConfig
@@ -132,6 +133,7 @@ def updated_manifest(
                 "id": uuid.uuid4().hex,
                 "versions": _versions(),
                 "git_commit": _git_commit(),
+                **_task_environment(config),
                 **({"changed": record} if record else {}),
                 # where DDPG ran this session: not configuration (results do not depend on it)
                 "execution": {
@@ -152,9 +154,24 @@ def updated_manifest(
             "git_commit": _git_commit(),
             "versions": _versions(),
             "host": platform.node(),
-            "sessions": [{"started": now, "id": uuid.uuid4().hex, **(provenance or {})}],
+            "sessions": [
+                {
+                    "started": now,
+                    "id": uuid.uuid4().hex,
+                    **_task_environment(config),
+                    **(provenance or {}),
+                }
+            ],
         }
     return manifest
+
+
+def _task_environment(config: ExperimentConfig) -> dict[str, Any]:
+    """A Gymnasium task's environment source and versions, for the session (none for the
+    coupled pendulums: their manifests stay as they were)."""
+    if config.task is None:
+        return {}
+    return {"task_environment": environment_versions(config.task)}
 
 
 def _changed_fields(stored: ExperimentConfig, config: ExperimentConfig) -> list[str]:

@@ -249,6 +249,37 @@ class GymnasiumTask:
         return make_environment(self.config)
 
 
+def environment_versions(config: GymnasiumTaskConfig) -> dict[str, Any]:
+    """Where the task's environment comes from: its id, its entry point, and the
+    distribution (and version) that provides the entry point's module; what a manifest
+    records so that a replay knows whether it may expect the same bits."""
+    from importlib import metadata
+
+    import gymnasium
+
+    try:
+        spec = gymnasium.spec(config.gymnasium.split(":")[-1])
+    except gymnasium.error.Error:
+        make_environment(config).close()  # imports a ``module:Id``'s module, registering it
+        spec = gymnasium.spec(config.gymnasium.split(":")[-1])
+    entry = spec.entry_point
+    entry_name = entry if isinstance(entry, str) else f"{entry.__module__}:{entry.__qualname__}"
+    top = entry_name.split(":")[0].split(".")[0]
+    distributions = metadata.packages_distributions().get(top, [])
+    versions = {}
+    for name in distributions:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return {
+        "id": config.gymnasium,
+        "entry_point": entry_name,
+        "gymnasium": gymnasium.__version__,
+        "distributions": versions,
+    }
+
+
 def observation_scaling(space: Any, config: GymnasiumTaskConfig) -> tuple[np.ndarray, np.ndarray]:
     """``(centre, half-width)`` per observation entry: the Box bounds' for ``bounds`` scaling
     (entries with an infinite or empty bound: 0 and 1, unscaled), else 0 and 1."""
@@ -268,4 +299,10 @@ def _one_line(error: BaseException) -> str:
     return text if len(text) <= 300 else text[:297] + "..."
 
 
-__all__ = ["Episode", "GymnasiumTask", "TaskEnvironmentError", "make_environment"]
+__all__ = [
+    "Episode",
+    "GymnasiumTask",
+    "TaskEnvironmentError",
+    "environment_versions",
+    "make_environment",
+]

@@ -88,6 +88,28 @@ def test_a_stored_fitness_that_does_not_replay_is_an_error(tmp_path):
     assert not report.ok and {f.check for f in report.errors} >= {"fitness", "start"}
 
 
+def test_sampled_elsewhere_the_replay_is_within_a_tolerance_and_a_miss_is_a_warning(tmp_path):
+    import json
+
+    from tests.conftest import reseal
+
+    out = tmp_path / "line"
+    run_experiment(line_config(), out, progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    session = manifest["sessions"][0]
+    assert session["task_environment"]["entry_point"].endswith(":Line")
+    session["task_environment"]["gymnasium"] = "0.29.1"  # sampled with another Gymnasium
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    reseal(out)
+    report = verify_experiment(out)
+    assert report.ok and any("replayed within 1e-09" in f.message for f in report.findings)
+    manifest["config"]["task"]["fitness_range"] = [-100, 0]  # now every fitness misses
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    reseal(out)
+    report = verify_experiment(out)
+    assert report.ok and {f.check for f in report.warnings} >= {"fitness", "start"}
+
+
 def test_a_run_is_the_same_serially_and_resumed(tmp_path):
     config = line_config()
     whole = run_experiment(config, tmp_path / "whole", progress=False)
@@ -115,3 +137,23 @@ def test_an_environment_failing_mid_run_names_the_run_and_keeps_what_was_stored(
     assert "run (p=0.001, run=0)" in text and "ValueError: contact solver diverged" in text
     after = read_experiment_trials(out)
     np.testing.assert_array_equal(after["fitness"], before["fitness"])
+
+
+@pytest.mark.parametrize(("workers", "scheduler"), [(2, None), (2, "dask-local")])
+def test_a_gymnasium_task_gives_the_same_trials_in_a_pool_and_on_dask(tmp_path, workers, scheduler):
+    config = ExperimentConfig.from_mapping(
+        {
+            **line_config().to_dict(),
+            "task": {
+                "gymnasium": "Pendulum-v1",
+                "fitness_range": [-3254.72, 0],
+                "episode_steps": 40,
+            },
+        }
+    )
+    serial = run_experiment(config, tmp_path / "serial", progress=False)
+    other = run_experiment(
+        config, tmp_path / "other", workers=workers, scheduler=scheduler, progress=False
+    )
+    columns = ["p", "run", "index", "parent", "fitness", "accepted", "start_fitness"]
+    assert serial[columns].equals(other[columns])

@@ -135,3 +135,32 @@ def test_a_missing_experiment_says_so_and_what_to_run(tmp_path, capsys):
     error = capsys.readouterr().err
     assert "no such folder" in error and "corrupt" not in error.lower()
     assert not folder.exists()  # nothing created while looking
+
+
+PENDULUM_V1 = """name: quick
+perturbations: [1.0e-3]
+runs: 2
+tolerance: 1
+max_local_searches: 2
+task: {gymnasium: Pendulum-v1, fitness_range: [-3254.72, 0.0], episode_steps: 50}
+ddpg: {batch_size: 16, buffer_size: 300, warmup_steps: 60, max_steps: 150, min_steps: 0,
+       patience_steps: 1000}
+"""
+
+
+def test_the_notebooks_sample_analyse_and_record_a_gymnasium_task(tmp_path):
+    root = clone_project(tmp_path / "clone")
+    (root / "quick.yaml").write_text(PENDULUM_V1)
+    books, data = root / "notebooks", root / "data" / "quick"
+    execute(books / "sample_lon.ipynb", tmp_path / "s.ipynb", books, config="quick.yaml", p=1e-3)
+    assert len(list(data.glob("p=*/run_*/trials.parquet"))) == 2
+    executed = execute(books / "analyse_lon.ipynb", tmp_path / "a.ipynb", books)
+    pngs = [out for out in outputs(executed) if "image/png" in out.get("data", {})]
+    assert len(pngs) == 4  # Figs. 2-5 of the one p; no conditioning figures
+    texts = "".join(
+        "".join(out.get("text", "")) + "".join(out.get("data", {}).get("text/markdown", ""))
+        for out in outputs(executed)
+    )
+    assert "skipped (they concern the coupled pendulums)" in texts
+    execute(books / "record_optima.ipynb", tmp_path / "r.ipynb", root, show_inline_viewer=False)
+    assert list((data / "recordings").glob("best_optimum_p=0.001_*.rrd"))
