@@ -123,6 +123,13 @@ def _run(args: argparse.Namespace) -> None:
         )
 
 
+def _task_words(config) -> str:
+    """`` (Gymnasium task Pendulum-v1, local search ddpg)`` for a Gymnasium task, else ""."""
+    if config.task is None:
+        return ""
+    return f" (Gymnasium task {config.task.gymnasium}, local search {config.task.search})"
+
+
 def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     """``lonlib run --dry-run``: every check ``run_experiment`` makes before computing
     (configuration, executor, slots, device, lockstep batch, output folder, a stored
@@ -177,7 +184,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     need = searches * search_memory_bytes(task_sizes(config), config.ddpg) / 2**30
     where += f"; about {need:.2g} GiB for {searches} search(es) at once"
     print(
-        f"dry run: {config.name}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
+        f"dry run: {config.name}{_task_words(config)}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
         f"{config.runs} runs per p; executor {where}; output {out} ({state}). "
         "Nothing computed or written."
     )
