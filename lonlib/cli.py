@@ -184,7 +184,8 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     need = searches * search_memory_bytes(task_sizes(config), config.ddpg) / 2**30
     where += f"; about {need:.2g} GiB for {searches} search(es) at once"
     print(
-        f"dry run: {config.name}{_task_words(config)}: p {', '.join(f'{p:g}' for p in config.perturbations)}, "
+        f"dry run: {config.name}{_task_words(config)}: "
+        f"p {', '.join(f'{p:g}' for p in config.perturbations)}, "
         f"{config.runs} runs per p; executor {where}; output {out} ({state}). "
         "Nothing computed or written."
     )
