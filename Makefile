@@ -11,7 +11,8 @@ TORCH_INDEX ?= https://download.pytorch.org/whl/cpu
 PIP    := pip==26.3
 UV     := uv==0.13.9
 # The lock (docs/environment.md): exact versions with hashes, one file per install (base;
-# base + dev + docs, since make test builds the site; base + docs; + lab; + bench), all
+# base + dev + docs + sb3, since make test builds the site and tests the SB3 searches;
+# base + docs; + lab; + bench), all
 # projections of one resolution (requirements/all.txt). torch stays out of it: installed
 # first, the CPU build.
 REQ    := requirements
@@ -108,7 +109,7 @@ test-latest:
 	$(call install_torch,$(LATEST)/bin)
 	echo "$(TORCH)" > $(LATEST)/torch-constraint.txt
 	$(LATEST)/bin/python -m pip install --quiet --upgrade --upgrade-strategy eager \
-	  -c $(LATEST)/torch-constraint.txt -e ".[dev,docs$(if $(BROWSER_TEST),$(comma)lab)]"
+	  -c $(LATEST)/torch-constraint.txt -e ".[dev,docs,sb3$(if $(BROWSER_TEST),$(comma)lab)]"
 	@$(LATEST)/bin/python $(REQ)/drift.py $(REQ)/$(if $(BROWSER_TEST),lab,dev).txt
 	$(LATEST)/bin/python -m pytest -q -n $(TEST_JOBS) -p no:cacheprovider -m "not serial"
 	$(LATEST)/bin/python -m pytest -q -p no:cacheprovider -m serial
@@ -123,10 +124,10 @@ lock: setup
 	$(BIN)/python -m pip install --quiet $(UV)
 	$(UV_COMPILE) $(LOCK_UPGRADE) --all-extras -o $(REQ)/all.txt
 	$(UV_COMPILE) -c $(REQ)/all.txt -o $(REQ)/base.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs -o $(REQ)/dev.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra sb3 -o $(REQ)/dev.txt
 	$(UV_COMPILE) -c $(REQ)/all.txt --extra docs -o $(REQ)/docs.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra lab -o $(REQ)/lab.txt
-	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra bench -o $(REQ)/bench.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra sb3 --extra lab -o $(REQ)/lab.txt
+	$(UV_COMPILE) -c $(REQ)/all.txt --extra dev --extra docs --extra sb3 --extra bench -o $(REQ)/bench.txt
 	$(BIN)/python $(REQ)/environment_yml.py $(REQ)/dev.txt $(TORCH) > environment.yml
 	@! grep -iE '^(torch|triton|nvidia-)' $(LOCK_FILES) || { echo "torch/CUDA in the lock"; exit 1; }
 

@@ -143,6 +143,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     )
     from lonlib.experiment.executors import resolve_executor, session_executor
     from lonlib.experiment.lockstep import check_drain, check_lockstep
+    from lonlib.sb3 import check_search
     from lonlib.storage.manifest import manifest_path, updated_manifest
 
     kind = resolve_executor(
@@ -153,6 +154,8 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     slots = config.slots if args.slots is None else args.slots
     check_range("slots", slots, 1, 100_000)
     check_device(config.ddpg.device)
+    if config.task is not None:
+        check_search(config.task.search, config.ddpg.device)
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
     check_drain(kind, None if args.drain_after is None else args.drain_after * 60)

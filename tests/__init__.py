@@ -1,5 +1,5 @@
 """lonlib's tests, mirroring the package: ``tests/<name>/`` tests ``lonlib/<name>`` (``util``,
-``config``, ``task``, ``search``, ``ddpg``, ``storage``, ``experiment``, ``lon``,
+``config``, ``task``, ``search``, ``ddpg``, ``sb3``, ``storage``, ``experiment``, ``lon``,
 ``analysis``, ``calibration``, ``cli``), ``tests/notebooks/`` the notebooks and
 ``lonlib.notebook_run``, and ``tests/project/`` the project as a whole (docs, layout, public
 names, types); each folder's ``__init__.py`` says what it holds. ``conftest.py`` holds the

@@ -612,10 +612,10 @@ def _rebuilt_starts(
     if "start_fitness" not in trials.columns:
         return []
     if config.task is None:
-        specs = (actor_spec(config.env.n_carts), critic_spec(config.env.n_carts))
+        specs = (actor_spec(config.env.n_carts), critic_spec(config.env.n_carts), 1)
     else:
         task = task_of(config)
-        specs = (task.actor_spec, task.critic_spec)
+        specs = (task.actor_spec, task.critic_spec, task.critic_count)
     parents: dict[tuple[float, int, int], tuple[np.ndarray, np.ndarray] | None] = {}
 
     def parent_parameters(p: float, run: int, parent: int):

@@ -23,6 +23,9 @@ OBSERVATION_SCALINGS = ("bounds", "none")
 SEARCHES = ("ddpg", "sb3-td3", "sb3-sac", "sb3-ddpg")
 """Local searches ``F`` a Gymnasium task can use: lonlib's DDPG, or Stable-Baselines3's TD3,
 SAC and DDPG (the optional extra ``lonlib[sb3]``)."""
+CRITICS = {"ddpg": 1, "sb3-td3": 2, "sb3-sac": 2, "sb3-ddpg": 1}
+"""Critics each search trains: TD3's and SAC's twin Q-networks are both in the Critic
+parameters ``omega`` (concatenated, each in the task's critic layout)."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,11 @@ class GymnasiumTaskConfig:
                 f"got {self.kwargs!r}"
             ) from None
 
+    @property
+    def critics(self) -> int:
+        """How many critics ``omega`` holds for this task's search (:data:`CRITICS`)."""
+        return CRITICS[self.search]
+
     def to_dict(self) -> dict[str, Any]:
         """Plain mapping (YAML/JSON friendly) that :meth:`from_mapping` reads back."""
         out = dataclasses.asdict(self)
@@ -120,4 +128,4 @@ def _finite_number(value: Any) -> bool:
     return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
 
 
-__all__ = ["OBSERVATION_SCALINGS", "SEARCHES", "GymnasiumTaskConfig"]
+__all__ = ["CRITICS", "OBSERVATION_SCALINGS", "SEARCHES", "GymnasiumTaskConfig"]

@@ -42,6 +42,7 @@ from lonlib.experiment.runs import (
     run_lock_path,
     run_summary,
 )
+from lonlib.sb3 import MISSING, check_search
 from lonlib.search.algorithm import LocalSearch
 from lonlib.storage.atomic import (
     DataWriteError,
@@ -110,10 +111,12 @@ def experiment_local_search(config: ExperimentConfig) -> LocalSearch:
     task = experiment_task(config)
     if config.task.search == "ddpg":
         return gymnasium_ddpg_local_search(task, config.ddpg)
-    raise NotImplementedError(
-        f"task.search {config.task.search!r}: Stable-Baselines3 local searches are not "
-        "available yet; use task.search: ddpg"
-    )
+    check_search(config.task.search, config.ddpg.device)
+    try:
+        from lonlib.sb3.search import sb3_gymnasium_local_search
+    except ImportError as error:  # installed, yet it does not import
+        raise ValueError(f"{MISSING.format(search=config.task.search)} ({error})") from None
+    return sb3_gymnasium_local_search(task, config.ddpg, config.task.search)
 
 
 # ---------------------------------------------------------------------------- experiments
@@ -262,6 +265,8 @@ def _session_config(
         check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
     config = dataclasses.replace(config, executor=kind, slots=slots)  # what this session uses
     check_device(config.ddpg.device)
+    if config.task is not None:
+        check_search(config.task.search, config.ddpg.device)
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
     return config, kind

@@ -31,7 +31,9 @@ def initial_parameters(config: ExperimentConfig, p: float, run: int) -> tuple[np
     if config.task is None:
         return random_parameters(config.run_seed(p, run), config.env.n_carts)
     task = experiment_task(config)
-    return random_networks(config.run_seed(p, run), task.actor_spec, task.critic_spec)
+    return random_networks(
+        config.run_seed(p, run), task.actor_spec, task.critic_spec, task.critic_count
+    )
 
 
 _TASKS: dict[Any, Any] = {}

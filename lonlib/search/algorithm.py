@@ -154,11 +154,14 @@ def random_parameters(run_seed: int, n_carts: int) -> tuple[np.ndarray, np.ndarr
 
 
 def random_networks(
-    run_seed: int, actor: NetSpec, critic: NetSpec
+    run_seed: int, actor: NetSpec, critic: NetSpec, critics: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Algorithm 2's random initial Actor and Critic of the shapes given (any task's)."""
+    """Algorithm 2's random initial Actor and Critic of the shapes given (any task's); with
+    ``critics`` > 1 the Critic parameters are that many critics drawn one after the other and
+    concatenated (the first is the one critic of ``critics`` = 1)."""
     rng = np.random.default_rng([run_seed, 1])
-    return actor.initial(rng), critic.initial(rng)
+    theta = actor.initial(rng)
+    return theta, np.concatenate([critic.initial(rng) for _ in range(critics)])
 
 
 def search_start(

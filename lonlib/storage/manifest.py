@@ -43,7 +43,17 @@ CHANGEABLE_FIELDS = ("max_local_searches",)
 """Settings a stored experiment may change when asked (``allow_changes``): a run's local
 searches do not depend on them, only where the run ends."""
 
-PACKAGES = ("numpy", "torch", "gymnasium", "pandas", "pyarrow", "networkx", "igraph", "dask")
+PACKAGES = (
+    "numpy",
+    "torch",
+    "gymnasium",
+    "stable-baselines3",  # the SB3 local searches (task.search: sb3-*), None when not installed
+    "pandas",
+    "pyarrow",
+    "networkx",
+    "igraph",
+    "dask",
+)
 
 
 def manifest_path(out: Path) -> Path:

@@ -135,6 +135,12 @@ class GymnasiumTask:
         """The paper's Critic shape on this task: observations and actions in, Q out."""
         return NetSpec((self.obs_size + self.action_size, *HIDDEN, 1), sigmoid_output=False)
 
+    @property
+    def critic_count(self) -> int:
+        """Critics in ``omega``, one after the other in :attr:`critic_spec`'s layout: two for
+        the twin-critic searches (``sb3-td3``, ``sb3-sac``), else one."""
+        return self.config.critics
+
     def observe(self, observation: Any) -> np.ndarray:
         """The Actor's input ``[o]`` (float64) for one raw observation."""
         return (np.asarray(observation, dtype=np.float64) - self._obs_centre) / self._obs_scale
