@@ -71,6 +71,11 @@ class UnsealedDataWarning(UserWarning):
     whether it changed. ``lonlib verify --seal`` seals it after a full replay."""
 
 
+class TamperedDataWarning(UserWarning):
+    """A reader that only reports (``lonlib status``) read data that no longer match their
+    seal: the message names the file, as :class:`TamperedDataError` does."""
+
+
 def bytes_digest(data: bytes) -> str:
     """SHA-256 of ``data``, hex."""
     return hashlib.sha256(data).hexdigest()
@@ -437,22 +442,40 @@ class SealCheck:
         """No tampered data (pending writes allowed)."""
         return not self.problems
 
-    def raise_if_tampered(self) -> None:
-        """TamperedDataError with one line naming the first file that differs."""
+    def message(self, reader: str | None = None, refused: bool = True) -> str:
+        """One line naming the first file that differs and ``reader``, the command that
+        stops on it (``refused``) or reads it all the same, pointing to ``lonlib verify``;
+        empty when nothing differs."""
+        if not self.problems:
+            return ""
+        name, what = self.problems[0]
+        more = f" (and {len(self.problems) - 1} more)" if len(self.problems) > 1 else ""
+        said = ""
+        if reader:
+            said = f", so `{reader}` stops" if refused else f" (`{reader}` shows it as it is)"
+        return (
+            f"{self.folder / name}: {what}{more}; the data no longer matches its seal{said}: "
+            f"`lonlib verify {self.folder}` lists every difference"
+        )
+
+    def raise_if_tampered(self, reader: str | None = None) -> None:
+        """TamperedDataError with one line naming the first file that differs (and
+        ``reader``, the command that refuses it)."""
         if self.problems:
-            name, what = self.problems[0]
-            more = f" (and {len(self.problems) - 1} more)" if len(self.problems) > 1 else ""
-            raise TamperedDataError(
-                f"{self.folder / name}: {what}{more}; the data no longer matches its seal: "
-                f"`lonlib verify {self.folder}` lists every difference"
-            )
+            raise TamperedDataError(self.message(reader))
 
 
 def check_experiment_seal(
-    root: Path, manifest: Mapping[str, Any], *, figures: bool = True, recordings: bool = True
+    root: Path,
+    manifest: Mapping[str, Any],
+    *,
+    figures: bool = True,
+    recordings: bool = True,
+    files: bool = True,
 ) -> SealCheck:
     """Compare an experiment folder with its seal: configuration, each run's trials (rows,
-    files, chain, count against the root), and (asked) the recordings and figures."""
+    chain, count against the root and, with ``files``, the trials' files), and (asked) the
+    recordings and figures."""
     root = Path(root)
     check = SealCheck(root, is_sealed(root))
     if not check.sealed:
@@ -478,7 +501,8 @@ def check_experiment_seal(
     for key in sorted(set(sealed_runs) - set(folders)):
         check.problems.append((f"{key}/trials.parquet", "a sealed run's trials table is missing"))
     for key, folder in folders.items():
-        _check_run(check, root, key, folder, sealed_runs.get(key))
+        run = _SealedRun(key, folder, sealed_runs.get(key))
+        _check_run(check, run, files)
     if recordings:
         _check_recordings(check, root, seal.get("recordings"))
     if figures:
@@ -486,35 +510,82 @@ def check_experiment_seal(
     return check
 
 
-def _check_run(
-    check: SealCheck, root: Path, key: str, folder: Path, sealed: Mapping[str, Any] | None
-) -> None:
-    digests = folder / RUN_DIGESTS
+@dataclass(frozen=True)
+class _SealedRun:
+    """A run's folder as the root seals it: ``sealed`` its count and head (None: not in the
+    root)."""
+
+    key: str
+    folder: Path
+    sealed: Mapping[str, Any] | None
+
+
+def _check_run(check: SealCheck, run: _SealedRun, files: bool) -> None:
+    # the table before the digests: a trial appended meanwhile then reads as sealed ahead
+    table = run.folder / "trials.parquet"
     try:
-        entries = _read(digests)["trials"] if digests.exists() else []
-    except TamperedDataError as error:
-        check.problems.append((f"{key}/{RUN_DIGESTS}", str(error).split(": ", 1)[-1]))
+        table_bytes: bytes | None = table.read_bytes()
+    except OSError:
+        table_bytes = None
+    entries = _run_entries(check, run)
+    if entries is None or not _check_head(check, run, entries):
         return
-    if [e.get("chain") for e in entries] != [e["chain"] for e in _chained(key, entries)]:
-        check.problems.append((f"{key}/{RUN_DIGESTS}", "its chain of trial digests is broken"))
-        return
-    count = 0 if sealed is None else int(sealed["trials"])
-    if sealed is not None:
-        head = sealed["head"]
-        if len(entries) < count or entries[count - 1]["chain"] != head:
-            check.problems.append(
-                (
-                    f"{key}/trials.parquet",
-                    f"the seal holds {count} trials of this run and they are not all here "
-                    f"({len(entries)} sealed in the run): trials were removed or rewritten",
-                )
-            )
-            return
     try:
-        rows = table_row_digests((folder / "trials.parquet").read_bytes())
+        if table_bytes is None:
+            raise OSError("cannot read the file")
+        rows = table_row_digests(table_bytes)
     except Exception as error:  # pyarrow raises several types for a damaged file
-        check.problems.append((f"{key}/trials.parquet", f"cannot be read ({error})"))
+        check.problems.append((f"{run.key}/trials.parquet", f"cannot be read ({error})"))
         return
+    _check_rows(check, run, entries, rows)
+    if files:
+        _check_trial_files(check, run, entries[: len(rows)])
+    check.sealed_trials[run.key] = min(len(entries), len(rows))
+    _check_stray_files(check, run, entries, len(rows))
+
+
+def _run_entries(check: SealCheck, run: _SealedRun) -> list[dict[str, Any]] | None:
+    """A run's sealed entries, once its chain holds from the run's start (None, the problem
+    noted, when it does not)."""
+    digests = run.folder / RUN_DIGESTS
+    name = f"{run.key}/{RUN_DIGESTS}"
+    if not digests.exists():
+        return []
+    try:
+        entries: list[dict[str, Any]] = _read(digests)["trials"]
+    except TamperedDataError as error:
+        check.problems.append((name, str(error).split(": ", 1)[-1]))
+        return None
+    if [e.get("chain") for e in entries] != [e["chain"] for e in _chained(run.key, entries)]:
+        check.problems.append((name, "its chain of trial digests is broken"))
+        return None
+    return entries
+
+
+def _check_head(check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]]) -> bool:
+    """Whether the run still holds the trials the root counts, up to its head (else the
+    problem is noted)."""
+    if run.sealed is None:
+        return True
+    count = int(run.sealed["trials"])
+    if len(entries) < count or entries[count - 1]["chain"] != run.sealed["head"]:
+        check.problems.append(
+            (
+                f"{run.key}/trials.parquet",
+                f"the seal holds {count} trials of this run and they are not all here "
+                f"({len(entries)} sealed in the run): trials were removed or rewritten",
+            )
+        )
+        return False
+    return True
+
+
+def _check_rows(
+    check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]], rows: list[str]
+) -> None:
+    """The table's rows against the run's entries and the root's count."""
+    key = run.key
+    count = 0 if run.sealed is None else int(run.sealed["trials"])
     if len(rows) < count:
         check.problems.append(
             (f"{key}/trials.parquet", f"holds {len(rows)} trials, the seal holds {count}")
@@ -532,14 +603,6 @@ def _check_run(
             check.problems.append(
                 (f"{key}/trials.parquet", f"trial {entry['index']}'s row differs from its seal")
             )
-    for entry in entries[: len(rows)]:
-        for name, digest in entry["files"].items():
-            path = folder / name
-            accepted = (digest, entry.get("next", {}).get(name))  # a rewrite sealed ahead
-            if not path.is_file():
-                check.problems.append((f"{key}/{name}", "a sealed file is missing"))
-            elif file_digest(path) not in accepted:
-                check.problems.append((f"{key}/{name}", "differs from its seal"))
     if len(rows) > len(entries):
         check.problems.append(
             (
@@ -557,17 +620,34 @@ def _check_run(
                 "`lonlib verify --seal` records them",
             )
         )
-    check.sealed_trials[key] = min(len(entries), len(rows))
-    sealed_names = {n for e in entries[: len(rows)] for n in e["files"]}
-    for path in sorted(folder.iterdir()):
+
+
+def _check_trial_files(check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]]) -> None:
+    """Each sealed trial's files (optimum, history) against their digests."""
+    for entry in entries:
+        for name, digest in entry["files"].items():
+            path = run.folder / name
+            accepted = (digest, entry.get("next", {}).get(name))  # a rewrite sealed ahead
+            if not path.is_file():
+                check.problems.append((f"{run.key}/{name}", "a sealed file is missing"))
+            elif file_digest(path) not in accepted:
+                check.problems.append((f"{run.key}/{name}", "differs from its seal"))
+
+
+def _check_stray_files(
+    check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]], rows: int
+) -> None:
+    """A trial's file no seal lists: a leftover of a trial the table lacks (pending), or
+    tampered data."""
+    sealed_names = {n for e in entries[:rows] for n in e["files"]}
+    for path in sorted(run.folder.iterdir()):
         match = _TRIAL_FILE.fullmatch(path.name)
         if match is None or path.name in sealed_names:
             continue  # not a trial's file (a temporary, the table, the lock), or sealed
-        index = int(match.group(1))
-        if index >= len(rows):
-            check.pending.append((f"{key}/{path.name}", "a leftover of an unsealed trial"))
+        if int(match.group(1)) >= rows:
+            check.pending.append((f"{run.key}/{path.name}", "a leftover of an unsealed trial"))
         else:
-            check.problems.append((f"{key}/{path.name}", "a file no seal lists"))
+            check.problems.append((f"{run.key}/{path.name}", "a file no seal lists"))
 
 
 def _check_recordings(
@@ -620,21 +700,34 @@ def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> Non
         )
 
 
-def check_readable(root: Path, manifest: Mapping[str, Any], verb: str) -> SealCheck:
-    """A reader's gate (``lonlib run`` on resume, ``analyse``, ``record``, ``thin``): stop
-    with one line naming the file that differs from the seal, before any compute; warn
-    (:class:`UnsealedDataWarning`) when the folder has no seal. Figures and recordings are
-    checked by ``lonlib verify`` (a reader of trials does not read them)."""
-    check = check_experiment_seal(root, manifest, figures=False, recordings=False)
+def check_readable(
+    root: Path,
+    manifest: Mapping[str, Any],
+    reader: str = "lonlib analyse",
+    *,
+    refuse: bool = True,
+    files: bool = True,
+) -> SealCheck:
+    """A reader's gate (``lonlib run`` on resume, ``analyse``, ``lon``, ``record``,
+    ``thin``; ``reader`` names it in the message): stop with one line naming the file that
+    differs from the seal, before any compute; warn (:class:`UnsealedDataWarning`) when the
+    folder has no seal. A reader that only reports (``lonlib status``: ``refuse`` False)
+    warns instead (:class:`TamperedDataWarning`), and checks what it reads (``files``
+    False: the trials tables and the chains, not every trial's files). Figures and
+    recordings are checked by ``lonlib verify`` (a reader of trials does not read them)."""
+    check = check_experiment_seal(root, manifest, figures=False, recordings=False, files=files)
     if not check.sealed:
         warnings.warn(
-            f"{root}: unsealed (written before digests): `lonlib {verb}` cannot tell whether it "
+            f"{root}: unsealed (written before digests): `{reader}` cannot tell whether it "
             f"changed since it was written; `lonlib verify {root} --seal` seals it after a "
             "full replay",
             UnsealedDataWarning,
             stacklevel=2,
         )
-    check.raise_if_tampered()
+    if refuse:
+        check.raise_if_tampered(reader)
+    elif not check.ok:
+        warnings.warn(check.message(reader, refused=False), TamperedDataWarning, stacklevel=2)
     return check
 
 
@@ -757,6 +850,7 @@ __all__ = [
     "SEAL_NAME",
     "SealCheck",
     "TamperedDataError",
+    "TamperedDataWarning",
     "UnsealedDataWarning",
     "append_trial",
     "check_experiment_seal",

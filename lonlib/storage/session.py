@@ -76,7 +76,7 @@ class SamplingSession:
                 remove_temporary_files(out, manifest_path(out).name)
                 new = not manifest_path(out).exists()
                 if not new:  # what is resumed must be what was sealed, before any compute
-                    check_readable(out, read_manifest(out), "run")
+                    check_readable(out, read_manifest(out), "lonlib run")
                 manifest = updated_manifest(config, out, provenance, allow_changes)
                 changed = bool(manifest["sessions"][-1].get("changed"))
                 _hold_sampling_lock(out, manifest, sampling, changed, held_by_another)

@@ -25,6 +25,7 @@ from lonlib.storage.digests import (
     RUN_DIGESTS,
     SEAL_NAME,
     TamperedDataError,
+    TamperedDataWarning,
     UnsealedDataWarning,
     check_experiment_seal,
     check_files_seal,
@@ -414,3 +415,51 @@ def test_a_stored_policy_checks_the_seal_and_carries_the_tables_fitness(small, c
     reseal(copy)
     table = pd.read_parquet(trials_path(copy, P, 0))
     assert load_policy(copy, P, 0, 1).fitness == table["fitness"].iloc[1]
+
+
+def test_status_says_a_folder_is_tampered_and_still_shows_it(small, copy, capsys):
+    from lonlib.experiment.running import status
+
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    with pytest.warns(TamperedDataWarning, match=r"run_0000/trials.parquet.*`lonlib status`"):
+        status(copy)
+    for argv in (["status", str(copy), "--runs"], ["status", str(copy), "--dry-run"]):
+        cli_main(argv)
+        out, err = capsys.readouterr()
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("lonlib: warning: "), err
+        assert "run_0000/trials.parquet" in lines[0] and "lonlib verify" in lines[0]
+    cli_main(["status", str(copy)])
+    assert "finished" in capsys.readouterr().out
+
+
+def test_the_fitness_scale_checks_what_it_reads(small, copy, tmp_path, monkeypatch):
+    from lonlib.analysis import fitness_scale
+
+    study = tmp_path / "study"
+    study.mkdir()
+    np.save(study / "actor.npy", np.zeros(3))
+    seal_files(study)
+    monkeypatch.setattr(fitness_scale, "EXPERIMENTS", ("out",))
+    monkeypatch.setattr(fitness_scale, "BALANCING_ACTOR", "study/actor.npy")
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    with pytest.raises(TamperedDataError, match="run_0000/trials.parquet.*fitness_scale"):
+        fitness_scale.fitness_scale_markdown(tmp_path)
+    reseal(copy)
+    np.save(study / "actor.npy", np.ones(3))
+    with pytest.raises(TamperedDataError, match="actor.npy: differs"):
+        fitness_scale.fitness_scale_markdown(tmp_path)
+
+
+@pytest.mark.parametrize("verb", ["lon", "analyse", "record", "thin", "run"])
+def test_a_reader_that_refuses_names_its_command(small, copy, verb, capsys):
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    runs = [["run", str(small[0]), "--out", str(copy)]]
+    argvs = runs if verb == "run" else [[verb, str(copy)], [verb, str(copy), "--dry-run"]]
+    if verb == "run":
+        argvs += [[*runs[0], "--dry-run"]]
+    for argv in argvs:
+        with pytest.raises(SystemExit):
+            cli_main(argv)
+        err = capsys.readouterr().err
+        assert "run_0000/trials.parquet" in err and f"`lonlib {verb}` stops" in err, argv
