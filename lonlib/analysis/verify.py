@@ -288,8 +288,9 @@ def seal_findings(seal: SealCheck) -> list[Finding]:
 
 def seal_experiment(report: VerifyReport) -> None:
     """Seal the experiment ``report`` verified (``lonlib verify --seal``): every run's trials
-    and files, the recordings index and the figures, as they are. ValueError when the
-    verification failed: a folder is sealed only after a full replay holds."""
+    and files, the recordings index and the figures, as they are; the manifest then records
+    that the folder is sealed. ValueError when the verification failed: a folder is sealed
+    only after a full replay holds."""
     # A seal interrupted part-way (runs sealed, the root not yet) is this command's own
     # state: sealing again completes it. Every other finding stops it.
     if blocks_sealing(report):
@@ -312,8 +313,9 @@ def seal_experiment(report: VerifyReport) -> None:
 
 
 def blocks_sealing(report: VerifyReport) -> bool:
-    """Whether ``report`` has an error other than this command's own interrupted seal (runs
-    sealed, the root not yet), which sealing again completes."""
+    """Whether ``report`` has an error other than a missing root seal (this command's own
+    interrupted seal, runs sealed and the root not yet, or a seal removed with the runs'
+    digests to accept a deliberate change), which sealing after a full replay completes."""
     return any(not _interrupted_seal(finding) for finding in report.errors)
 
 

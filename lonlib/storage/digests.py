@@ -10,14 +10,22 @@ Layout (beside :mod:`lonlib.storage.layout`)::
 
     data/<experiment>/seal.json              the root: the configuration's digest, each run's
                                              trial count and chain head, the recordings
-                                             index, the figures and their inputs' digest
+                                             index, the figures and their inputs' digest,
+                                             the chains' configuration
     p=<p>/run_<run>/digests.json             the run's chain: per trial, the digest of its
                                              row of the trials table and of its files
                                              (optimum, history)
+    data/<experiment>/manifest.json          ``"sealed": true`` once the folder is sealed
 
-Each run's entries are chained (entry *i* hashes entry *i − 1*'s chain value), and the root
-keeps each run's count and head, so removing a run's last trials (rows, files and entries
-alike) no longer matches the root.
+Each run's entries are chained (entry *i* hashes entry *i − 1*'s chain value) from a start
+made of the run's name and the configuration's digest when the experiment was first sealed
+(``chain_config``, kept in the root and in each run's ``digests.json``), and the root keeps
+each run's count and head, so removing a run's last trials (rows, files and entries alike)
+no longer matches the root, and a run moved in from an experiment of another configuration
+is named. Folders sealed before ``chain_config`` existed keep their chains (started from the
+run's name alone) until they are sealed again from scratch. The manifest records that the
+folder was sealed, so a folder that lost its seal and every run's digests is tampered data,
+not an unsealed one.
 
 **Write order** (each file by atomic rename): a trial's history and optimum, the run's
 ``digests.json`` (the trial sealed ahead), the trials table (the run's commit point), and the
@@ -48,7 +56,7 @@ from typing import Any
 
 import pandas as pd
 
-from lonlib.storage.atomic import CorruptDataError, atomic_write
+from lonlib.storage.atomic import CorruptDataError, atomic_write, read_json, write_json
 
 SEAL_NAME = "seal.json"
 """The root of an experiment's (or a folder's) seal."""
@@ -58,6 +66,8 @@ SEAL_FORMAT = 1
 FIGURES_FOLDER = "figures"
 RECORDINGS_FOLDER = "recordings"
 RUN_FILES = ("optimum_{:04d}.npz", "history_{:04d}.parquet")
+SEALED_FIELD = "sealed"
+"""In the manifest: ``true`` once the folder was sealed (its seal then must be there)."""
 _TRIAL_FILE = re.compile(r"(?:optimum|history)_(\d{4,})\.(?:npz|parquet)")
 """A trial's files in its run's folder (:mod:`lonlib.storage.layout`), by trial index."""
 
@@ -124,8 +134,12 @@ def _run_key(run_folder: Path, root: Path) -> str:
     return run_folder.relative_to(root).as_posix()
 
 
-def _chain_start(key: str) -> str:
-    return bytes_digest(f"lonlib run {key}".encode())
+def _chain_start(key: str, config: str | None) -> str:
+    """Where a run's chain starts: its name and the configuration it was sealed under
+    (``None``: a chain sealed before ``chain_config`` existed, from the name alone)."""
+    if config is None:
+        return bytes_digest(f"lonlib run {key}".encode())
+    return bytes_digest(f"lonlib run {key} config {config}".encode())
 
 
 def _entry_text(entry: Mapping[str, Any]) -> str:
@@ -133,10 +147,12 @@ def _entry_text(entry: Mapping[str, Any]) -> str:
     return json.dumps(body, sort_keys=True, separators=(",", ":"))
 
 
-def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def _chained(
+    key: str, entries: Iterable[Mapping[str, Any]], config: str | None
+) -> list[dict[str, Any]]:
     """``entries`` with their chain values computed from the run's start (a rewrite sealed
     ahead, ``next``, is kept beside the chain, outside it)."""
-    previous, out = _chain_start(key), []
+    previous, out = _chain_start(key, config), []
     for entry in entries:
         previous = bytes_digest((previous + _entry_text(entry)).encode())
         new = {**{k: entry[k] for k in ("index", "row", "files")}, "chain": previous}
@@ -146,10 +162,22 @@ def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, A
     return out
 
 
-def _write_run(folder: Path, root: Path, entries: Iterable[Mapping[str, Any]]) -> None:
-    """Write a run's ``digests.json``: ``entries`` chained from the run's start."""
-    payload = {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
+def _write_run(
+    folder: Path, root: Path, entries: Iterable[Mapping[str, Any]], config: str | None
+) -> None:
+    """Write a run's ``digests.json``: ``entries`` chained from the run's start, under the
+    chains' configuration ``config`` (None: a chain of a folder sealed before it existed)."""
+    key = _run_key(folder, root)
+    payload: dict[str, Any] = {"format": SEAL_FORMAT, "trials": _chained(key, entries, config)}
+    if config is not None:
+        payload["config"] = config
     _write(folder / RUN_DIGESTS, payload)
+
+
+def _read_run(path: Path) -> tuple[list[dict[str, Any]], str | None]:
+    """A run's ``digests.json``: its entries and the configuration its chain starts from."""
+    payload = _read(path)
+    return payload["trials"], payload.get("config")
 
 
 def settle_ahead(run_folder: Path, root: Path) -> None:
@@ -158,7 +186,7 @@ def settle_ahead(run_folder: Path, root: Path) -> None:
     path = Path(run_folder) / RUN_DIGESTS
     if not path.exists():
         return
-    entries = _read(path)["trials"]
+    entries, config = _read_run(path)
     if not any(entry.get("next") for entry in entries):
         return
     for entry in entries:
@@ -166,7 +194,7 @@ def settle_ahead(run_folder: Path, root: Path) -> None:
             file = Path(run_folder) / name
             if file.is_file() and file_digest(file) == digest:
                 entry["files"][name] = digest
-    _write_run(Path(run_folder), Path(root), entries)
+    _write_run(Path(run_folder), Path(root), entries, config)
 
 
 def _write(path: Path, payload: Mapping[str, Any]) -> None:
@@ -194,6 +222,8 @@ def _is_digest(value: object) -> bool:
 
 def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
     """What is malformed in a seal (``run``: a run's ``digests.json``), or None."""
+    if "config" in payload and run and not _is_digest(payload["config"]):
+        return "'config' is not a digest"
     if run:
         entries = payload.get("trials")
         if not isinstance(entries, list):
@@ -227,6 +257,8 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
         isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
     ):
         return "'recordings' is not a mapping of recordings to their trial and digest"
+    if "chain_config" in payload and not _is_digest(payload["chain_config"]):
+        return "'chain_config' is not a digest"
     figures = payload.get("figures", {})
     if not isinstance(figures, dict) or not isinstance(figures.get("files", {}), dict):
         return "'figures' is not a mapping"
@@ -246,6 +278,15 @@ def config_digest(manifest: Mapping[str, Any]) -> str:
 # ----------------------------------------------------------------------------- writers
 
 
+def _chains_config(old: Mapping[str, Any], manifest: Mapping[str, Any]) -> str | None:
+    """The configuration digest the runs' chains start from: the current root's (None in a
+    folder sealed before it existed), or the configuration's for a folder sealed now."""
+    if old:
+        value = old.get("chain_config")
+        return value if isinstance(value, str) else None
+    return config_digest(manifest)
+
+
 def append_trial(
     run_folder: Path, root: Path, table_bytes: bytes, files: Mapping[str, bytes]
 ) -> None:
@@ -255,7 +296,10 @@ def append_trial(
     if not is_sealed(root):
         return
     path = run_folder / RUN_DIGESTS
-    entries = _read(path)["trials"] if path.exists() else []
+    if path.exists():
+        entries, config = _read_run(path)
+    else:  # the run's first trial: its chain starts from the root's configuration
+        entries, config = [], _read(Path(root) / SEAL_NAME).get("chain_config")
     rows = table_row_digests(table_bytes)
     index = len(rows) - 1
     # an entry ahead of a table that was never written (a kill between the two) is replaced
@@ -266,7 +310,7 @@ def append_trial(
         )
     files_part = {name: bytes_digest(data) for name, data in sorted(files.items())}
     entries.append({"index": index, "row": rows[index], "files": files_part})
-    _write_run(run_folder, root, entries)
+    _write_run(run_folder, root, entries, config)
 
 
 def _run_folders(root: Path) -> list[Path]:
@@ -277,7 +321,7 @@ def _sealed_runs(root: Path) -> dict[str, dict[str, Any]]:
     """Each run's sealed count and chain head, from its ``digests.json``."""
     runs = {}
     for folder in sorted(p.parent for p in root.glob(f"p=*/run_*/{RUN_DIGESTS}")):
-        entries = _read(folder / RUN_DIGESTS)["trials"]
+        entries, _ = _read_run(folder / RUN_DIGESTS)
         if entries:
             runs[_run_key(folder, root)] = {"trials": len(entries), "head": entries[-1]["chain"]}
     return runs
@@ -313,6 +357,9 @@ def write_root(
         "config": config_digest(manifest),
         "runs": _sealed_runs(root),
     }
+    chains = _chains_config(old, manifest)
+    if chains is not None:
+        seal["chain_config"] = chains
     if next_manifest is not None and config_digest(next_manifest) != seal["config"]:
         seal["config_next"] = config_digest(next_manifest)
     if recordings is not None:
@@ -343,10 +390,23 @@ def refresh_root(root: Path, manifest: Mapping[str, Any]) -> None:
         write_root(root, manifest)
 
 
+def mark_sealed(root: Path) -> None:
+    """Record in the folder's manifest that it is sealed (:data:`SEALED_FIELD`), so that a
+    seal lost later reads as tampered data, not as a folder written before digests. The
+    caller holds the manifest lock."""
+    path = Path(root) / "manifest.json"
+    manifest = read_json(path)
+    if manifest.get(SEALED_FIELD) is not True:
+        write_json(path, {**manifest, SEALED_FIELD: True})
+
+
 def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
     """Seal every run of ``root`` as it is now (``lonlib verify --seal``, after a full
-    replay; never silently): each run's chain from its table and files, then the root."""
+    replay; never silently): each run's chain from its table and files (from the current
+    root's chain configuration, so that a seal killed part-way is completed by sealing
+    again), then the root, then the mark in the manifest (:func:`mark_sealed`)."""
     root = Path(root)
+    config = _chains_config(_read(root / SEAL_NAME) if is_sealed(root) else {}, manifest)
     for folder in _run_folders(root):
         table_bytes = (folder / "trials.parquet").read_bytes()
         entries = []
@@ -355,8 +415,9 @@ def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
             entries.append(
                 {"index": index, "row": row, "files": {n: file_digest(folder / n) for n in names}}
             )
-        _write_run(folder, root, entries)
+        _write_run(folder, root, entries, config)
     write_root(root, manifest)
+    mark_sealed(root)
 
 
 def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
@@ -371,12 +432,12 @@ def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
         path = folder / RUN_DIGESTS
         if not path.exists():
             continue
-        entries = _read(path)["trials"]
+        entries, config = _read_run(path)
         for entry in entries:
             ahead = {n: d for n, d in names.items() if n in entry["files"]}
             if ahead:
                 entry["next"] = {**entry.get("next", {}), **ahead}
-        _write_run(folder, root, entries)
+        _write_run(folder, root, entries, config)
 
 
 def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path]) -> None:
@@ -390,12 +451,12 @@ def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path])
         digests = folder / RUN_DIGESTS
         if not digests.exists():
             continue
-        entries = _read(digests)["trials"]
+        entries, config = _read_run(digests)
         names = {p.name: file_digest(p) for p in changed}
         for entry in entries:
             entry["files"] = {n: names.get(n, d) for n, d in entry["files"].items()}
             entry.pop("next", None)
-        _write_run(folder, root, entries)
+        _write_run(folder, root, entries, config)
     write_root(root, manifest)
 
 
@@ -479,12 +540,7 @@ def check_experiment_seal(
     root = Path(root)
     check = SealCheck(root, is_sealed(root))
     if not check.sealed:
-        chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
-        if chained:  # written with digests: a lost root is not an old experiment
-            check.sealed = True
-            check.problems.append(
-                (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
-            )
+        _check_lost_seal(check, root, manifest)
         return check
     try:
         seal = _read(root / SEAL_NAME)
@@ -501,7 +557,7 @@ def check_experiment_seal(
     for key in sorted(set(sealed_runs) - set(folders)):
         check.problems.append((f"{key}/trials.parquet", "a sealed run's trials table is missing"))
     for key, folder in folders.items():
-        run = _SealedRun(key, folder, sealed_runs.get(key))
+        run = _SealedRun(key, folder, sealed_runs.get(key), seal.get("chain_config"))
         _check_run(check, run, files)
     if recordings:
         _check_recordings(check, root, seal.get("recordings"))
@@ -510,14 +566,36 @@ def check_experiment_seal(
     return check
 
 
+def _check_lost_seal(check: SealCheck, root: Path, manifest: Mapping[str, Any]) -> None:
+    """A folder without its root seal: tampered if its runs hold digests or its manifest
+    records that it was sealed (a lost seal is not an old experiment), else unsealed."""
+    chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
+    if chained:  # written with digests: a lost root is not an old experiment
+        check.sealed = True
+        check.problems.append(
+            (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
+        )
+    elif manifest.get(SEALED_FIELD) is True:
+        check.sealed = True
+        check.problems.append(
+            (
+                SEAL_NAME,
+                "missing, while the manifest records that the folder was sealed (the seal and "
+                "every run's digests are gone)",
+            )
+        )
+
+
 @dataclass(frozen=True)
 class _SealedRun:
     """A run's folder as the root seals it: ``sealed`` its count and head (None: not in the
-    root)."""
+    root), ``chains`` the configuration its chain must start from (None: a root sealed
+    before chain configurations, which accepts the run's own)."""
 
     key: str
     folder: Path
     sealed: Mapping[str, Any] | None
+    chains: str | None
 
 
 def _check_run(check: SealCheck, run: _SealedRun, files: bool) -> None:
@@ -545,18 +623,29 @@ def _check_run(check: SealCheck, run: _SealedRun, files: bool) -> None:
 
 
 def _run_entries(check: SealCheck, run: _SealedRun) -> list[dict[str, Any]] | None:
-    """A run's sealed entries, once its chain holds from the run's start (None, the problem
-    noted, when it does not)."""
+    """A run's sealed entries, once its chain holds from the experiment's start (None,
+    the problem noted, when it does not)."""
     digests = run.folder / RUN_DIGESTS
     name = f"{run.key}/{RUN_DIGESTS}"
     if not digests.exists():
         return []
     try:
-        entries: list[dict[str, Any]] = _read(digests)["trials"]
+        entries, config = _read_run(digests)
     except TamperedDataError as error:
         check.problems.append((name, str(error).split(": ", 1)[-1]))
         return None
-    if [e.get("chain") for e in entries] != [e["chain"] for e in _chained(run.key, entries)]:
+    if run.chains is not None and config != run.chains:
+        check.problems.append(
+            (
+                name,
+                "chained from another configuration than this experiment's (another "
+                "experiment's run?)",
+            )
+        )
+        return None
+    if [e.get("chain") for e in entries] != [
+        e["chain"] for e in _chained(run.key, entries, config)
+    ]:
         check.problems.append((name, "its chain of trial digests is broken"))
         return None
     return entries
@@ -835,18 +924,19 @@ def drop_unwritten_trials(run_folder: Path, root: Path) -> int:
     path = run_folder / RUN_DIGESTS
     if not is_sealed(root) or not path.exists():
         return 0
-    entries = _read(path)["trials"]
+    entries, config = _read_run(path)
     table = run_folder / "trials.parquet"
     rows = len(table_row_digests(table.read_bytes())) if table.exists() else 0
     if len(entries) <= rows:
         return 0
     kept = entries[:rows]
-    _write_run(run_folder, root, kept)
+    _write_run(run_folder, root, kept, config)
     return len(entries) - rows
 
 
 __all__ = [
     "RUN_DIGESTS",
+    "SEALED_FIELD",
     "SEAL_NAME",
     "SealCheck",
     "TamperedDataError",
@@ -858,6 +948,7 @@ __all__ = [
     "check_readable",
     "file_digest",
     "is_sealed",
+    "mark_sealed",
     "reseal_files",
     "reseal_files_if_sealed",
     "reseal_outputs",

@@ -24,6 +24,7 @@ from lonlib.experiment.running import run_experiment
 from lonlib.storage.digests import (
     RUN_DIGESTS,
     SEAL_NAME,
+    SEALED_FIELD,
     TamperedDataError,
     TamperedDataWarning,
     UnsealedDataWarning,
@@ -54,6 +55,14 @@ def copy(small, tmp_path):
     return tmp_path / "out"
 
 
+@pytest.fixture(scope="module")
+def other(tmp_path_factory):
+    """Another configuration (two searches per run, not three), sampled the same way:
+    (YAML path, folder); its runs end at the cap, so raising it continues them."""
+    _, path, out = sample_small(tmp_path_factory.mktemp("other"), P, 2, "other")
+    return path, out
+
+
 def findings(folder: Path) -> list[str]:
     return [str(f) for f in verify_experiment(folder, recordings=False).errors]
 
@@ -77,6 +86,7 @@ def test_a_new_experiment_is_sealed_and_verifies(small):
     assert check.ok and check.pending == [], (check.problems, check.pending)
     report = verify_experiment(out, recordings=False)
     assert report.ok and report.sealed and report.findings == []
+    assert read_manifest(out)[SEALED_FIELD] is True
 
 
 def rewrite_table(folder, run, change):
@@ -165,10 +175,18 @@ def test_the_incumbent_on_resume_is_the_tables_fitness(small, copy):
     assert state.incumbent.fitness == table["fitness"].iloc[state.incumbent_index]
 
 
-def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, capsys):
-    (copy / SEAL_NAME).unlink()
-    for path in copy.glob(f"p=*/run_*/{RUN_DIGESTS}"):
+def unseal(folder: Path) -> None:
+    """``folder`` as written before digests: no seal, no run digests, no mark of a seal."""
+    (folder / SEAL_NAME).unlink()
+    for path in folder.glob(f"p=*/run_*/{RUN_DIGESTS}"):
         path.unlink()
+    manifest = json.loads((folder / "manifest.json").read_text())
+    del manifest[SEALED_FIELD]
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
+def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, capsys):
+    unseal(copy)
     with pytest.warns(UnsealedDataWarning, match="unsealed .* --seal"):
         load_experiment(copy)
     report = verify_experiment(copy, recordings=False)
@@ -177,6 +195,7 @@ def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, c
     cli_main(["verify", "--seal", str(copy)])
     assert "sealed:" in capsys.readouterr().out
     assert verify_experiment(copy, recordings=False).findings == []
+    assert read_manifest(copy)[SEALED_FIELD] is True  # losing the seal now is tampering
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_experiment(copy)
@@ -415,6 +434,51 @@ def test_a_stored_policy_checks_the_seal_and_carries_the_tables_fitness(small, c
     reseal(copy)
     table = pd.read_parquet(trials_path(copy, P, 0))
     assert load_policy(copy, P, 0, 1).fitness == table["fitness"].iloc[1]
+
+
+def test_a_sealed_folder_that_lost_its_seal_and_every_digest_is_refused_not_unsealed(
+    small, copy, capsys
+):
+    """The manifest records the seal: removing it and every run's digests is tampering
+    (named, refused), not a folder written before digests; `verify --seal` after a full
+    replay is still the way to accept a deliberate change."""
+    (copy / SEAL_NAME).unlink()
+    for path in copy.glob(f"p=*/run_*/{RUN_DIGESTS}"):
+        path.unlink()
+    assert any("seal.json: missing, while the manifest" in e for e in findings(copy))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnsealedDataWarning)
+        with pytest.raises(TamperedDataError, match="seal.json: missing") as caught:
+            load_experiment(copy)
+    assert "\n" not in str(caught.value)
+    cli_main(["verify", "--seal", str(copy)])
+    assert "sealed:" in capsys.readouterr().out
+    assert verify_experiment(copy, recordings=False).findings == []
+
+
+def move_in_other_run(copy: Path, other: Path) -> Path:
+    """``copy`` resealed without its run 1, then ``other``'s run 1 (the same name, another
+    configuration) moved in with its digests: the run's digests.json."""
+    shutil.rmtree(run_dir(copy, P, 1))
+    reseal(copy)
+    shutil.copytree(run_dir(other, P, 1), run_dir(copy, P, 1))
+    return run_dir(copy, P, 1) / RUN_DIGESTS
+
+
+def test_a_run_moved_in_from_an_experiment_of_another_configuration_is_named(small, other, copy):
+    """Not in the root, its chain whole: before chains started from the configuration it
+    read as a session's trials not yet in the root."""
+    move_in_other_run(copy, other[1])
+    assert_caught(copy, "run_0001/digests.json", small[0])
+
+
+def test_a_moved_run_relabelled_with_this_configuration_has_a_broken_chain(small, other, copy):
+    digests = move_in_other_run(copy, other[1])
+    payload = json.loads(digests.read_text())
+    payload["config"] = json.loads((copy / SEAL_NAME).read_text())["chain_config"]
+    digests.write_text(json.dumps(payload))
+    assert any("run_0001/digests.json: its chain" in e for e in findings(copy))
+    assert_caught(copy, "run_0001/digests.json", small[0])
 
 
 def test_status_says_a_folder_is_tampered_and_still_shows_it(small, copy, capsys):
