@@ -10,8 +10,8 @@ Layout (beside :mod:`lonlib.storage.layout`)::
 
     data/<experiment>/seal.json              the root: the configuration's digest, each run's
                                              trial count and chain head, the recordings
-                                             index, the figures and their inputs' digest,
-                                             the chains' configuration
+                                             index, the figures and the inputs they were
+                                             drawn from, the chains' configuration
     p=<p>/run_<run>/digests.json             the run's chain: per trial, the digest of its
                                              row of the trials table and of its files
                                              (optimum, history)
@@ -262,6 +262,9 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
     figures = payload.get("figures", {})
     if not isinstance(figures, dict) or not isinstance(figures.get("files", {}), dict):
         return "'figures' is not a mapping"
+    drawn = figures.get("inputs_of", {})
+    if not isinstance(drawn, dict) or not all(v is None or _is_digest(v) for v in drawn.values()):
+        return "'figures.inputs_of' is not a mapping of figures to digests"
     return None
 
 
@@ -334,21 +337,77 @@ def inputs_digest(seal: Mapping[str, Any]) -> str:
     return bytes_digest(json.dumps(body, sort_keys=True).encode())
 
 
+def _inputs_now(root: Path, seal: Mapping[str, Any]) -> str:
+    """:func:`inputs_digest` of the trials as the runs' chains hold them now (a session may
+    have sealed trials the root does not count yet)."""
+    return inputs_digest({"config": seal.get("config"), "runs": _sealed_runs(root)})
+
+
+def figure_files(root: Path) -> list[Path]:
+    """The files of an experiment's figures folder that its seal covers: all but the 3-D
+    LON's HTML pages (kept out of git) and hidden files (temporaries)."""
+    folder = Path(root) / FIGURES_FOLDER
+    if not folder.is_dir():
+        return []
+    return sorted(
+        p
+        for p in folder.iterdir()
+        if p.is_file() and p.suffix != ".html" and not p.name.startswith(".")
+    )
+
+
+def _drawn_from(figures: Mapping[str, Any], name: str) -> str | None:
+    """The inputs digest a sealed figure was drawn from (None: not recorded)."""
+    drawn = figures.get("inputs_of", {})
+    if name in drawn:
+        value = drawn[name]
+    else:
+        value = figures.get("inputs")
+    return value if isinstance(value, str) else None
+
+
+def _figures_seal(
+    root: Path,
+    inputs: str,
+    old: Mapping[str, Any] | None,
+    written: Iterable[Path],
+    stale: Mapping[str, str | None],
+) -> dict[str, Any]:
+    """The root's figures: the files ``written`` (their digests; drawn from ``inputs`` but
+    for those ``stale`` names, drawn from the inputs given there), and the files of an
+    earlier analysis that are still there and were not written again, as they were sealed
+    (digest and inputs): an analysis without the conditioning keeps the conditioning's."""
+    files = {Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in written}
+    drawn = {name: stale[name] for name in files if name in stale}
+    for name, digest in (old or {}).get("files", {}).items():
+        if name not in files and (root / name).is_file():
+            files[name] = digest
+            recorded = _drawn_from(old or {}, name)
+            if recorded != inputs:
+                drawn[name] = recorded
+    entry: dict[str, Any] = {"inputs": inputs, "files": dict(sorted(files.items()))}
+    if drawn:
+        entry["inputs_of"] = dict(sorted(drawn.items()))
+    return entry
+
+
 def write_root(
     root: Path,
     manifest: Mapping[str, Any],
     *,
     recordings: Mapping[str, Mapping[str, Any]] | None = None,
     figures: Iterable[Path] | None = None,
+    stale_figures: Mapping[str, str | None] | None = None,
     next_manifest: Mapping[str, Any] | None = None,
 ) -> None:
     """Write the root seal from the runs' chains as they are now, the manifest's
     configuration, and (given) the recordings index (file name → its trial's ``p``, ``run``,
     ``index``, ``fitness``) or the figures just written (their digests and their inputs'
-    digest); what is not given is kept from the current root. ``next_manifest``: a manifest
-    about to replace ``manifest`` with changed settings (sealed ahead, so that a kill between
-    the two writes leaves either accepted). The caller holds the manifest lock and has
-    checked what it read."""
+    digest, merged with the earlier figures still there; ``stale_figures``: those among them
+    drawn from other inputs, name → that digest or None); what is not given is kept from the
+    current root. ``next_manifest``: a manifest about to replace ``manifest`` with changed
+    settings (sealed ahead, so that a kill between the two writes leaves either accepted).
+    The caller holds the manifest lock and has checked what it read."""
     root = Path(root)
     old = _read(root / SEAL_NAME) if is_sealed(root) else {}
     seal: dict[str, Any] = {
@@ -371,12 +430,9 @@ def write_root(
     elif "recordings" in old:
         seal["recordings"] = old["recordings"]
     if figures is not None:
-        seal["figures"] = {
-            "inputs": inputs_digest(seal),
-            "files": {
-                Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in sorted(figures)
-            },
-        }
+        seal["figures"] = _figures_seal(
+            root, inputs_digest(seal), old.get("figures"), figures, stale_figures or {}
+        )
     elif "figures" in old:
         seal["figures"] = old["figures"]
     _write(root / SEAL_NAME, seal)
@@ -418,6 +474,23 @@ def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
         _write_run(folder, root, entries, config)
     write_root(root, manifest)
     mark_sealed(root)
+
+
+def stale_figures(root: Path) -> dict[str, str | None]:
+    """The figure files of ``root`` (:func:`figure_files`) that were not drawn from its trials
+    as they are now: name → the inputs digest its seal recorded (None: never recorded).
+    ``lonlib verify --seal`` seals them so, and they stay stale until ``lonlib analyse``."""
+    root = Path(root)
+    seal = _read(root / SEAL_NAME) if is_sealed(root) else {}
+    figures = seal.get("figures", {})
+    now = _inputs_now(root, seal) if seal else None
+    out: dict[str, str | None] = {}
+    for path in figure_files(root):
+        name = path.relative_to(root).as_posix()
+        drawn = _drawn_from(figures, name) if name in figures.get("files", {}) else None
+        if drawn is None or drawn != now:
+            out[name] = drawn
+    return out
 
 
 def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
@@ -465,11 +538,14 @@ def reseal_outputs(
     *,
     figures: Iterable[Path] | None = None,
     recordings: Mapping[str, Mapping[str, Any]] | None = None,
+    stale_figures: Mapping[str, str | None] | None = None,
 ) -> bool:
     """After ``lonlib analyse`` (``figures``: the files it wrote; its HTML pages, kept out of
-    git, are left out) or ``lonlib record`` (``recordings``: the index of every recording
-    in the folder): their digests in the root seal, under the manifest lock. Nothing in an
-    unsealed folder (returns False)."""
+    git, are left out; the earlier figures still there are kept, :func:`write_root`) or
+    ``lonlib record`` (``recordings``: the index of every recording in the folder): their
+    digests in the root seal, under the manifest lock. ``stale_figures``: figures not drawn
+    from the trials as they are (``lonlib verify --seal``, :func:`stale_figures`). Nothing
+    in an unsealed folder (returns False)."""
     from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
     from lonlib.storage.lock import exclusive_lock
 
@@ -478,7 +554,13 @@ def reseal_outputs(
         return False
     kept = None if figures is None else [Path(f) for f in figures if Path(f).suffix != ".html"]
     with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
-        write_root(root, read_manifest(root), recordings=recordings, figures=kept)
+        write_root(
+            root,
+            read_manifest(root),
+            recordings=recordings,
+            figures=kept,
+            stale_figures=stale_figures,
+        )
     return True
 
 
@@ -771,20 +853,35 @@ def _check_recordings(
 
 
 def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> None:
-    figures = seal.get("figures")
-    if figures is None:
-        return
-    for name, digest in sorted(figures.get("files", {}).items()):
+    """The sealed figures and tables (each there and unchanged), the files of the figures
+    folder the seal does not list, and whether they were drawn from the trials as they are."""
+    figures = seal.get("figures") or {}
+    listed = dict(figures.get("files", {}))
+    for name, digest in sorted(listed.items()):
         path = root / name
         if not path.is_file():
             check.problems.append((name, "a sealed figure or table is missing"))
         elif file_digest(path) != digest:
             check.problems.append((name, "differs from its seal"))
-    if figures.get("inputs") != inputs_digest(seal):
+    for path in figure_files(root):
+        name = path.relative_to(root).as_posix()
+        if name not in listed:
+            check.problems.append(
+                (
+                    name,
+                    "a figure or table the seal does not list (added by hand, or written by an "
+                    "analysis that stopped before sealing it: `lonlib analyse` again)",
+                )
+            )
+    now = _inputs_now(root, seal) if listed else None
+    stale = [name for name in sorted(listed) if _drawn_from(figures, name) != now]
+    if stale:
         check.pending.append(
             (
                 FIGURES_FOLDER,
-                "made from an earlier state of the trials (stale): `lonlib analyse` again",
+                f"{len(stale)} of {len(listed)} figures and tables ({stale[0]}"
+                f"{', ...' if len(stale) > 1 else ''}) made from an earlier state of the "
+                "trials (stale): `lonlib analyse` again",
             )
         )
 
@@ -946,6 +1043,7 @@ __all__ = [
     "check_experiment_seal",
     "check_files_seal",
     "check_readable",
+    "figure_files",
     "file_digest",
     "is_sealed",
     "mark_sealed",
@@ -958,6 +1056,7 @@ __all__ = [
     "seal_files",
     "settle_ahead",
     "seal_runs",
+    "stale_figures",
     "drop_unwritten_trials",
     "write_root",
 ]

@@ -63,6 +63,23 @@ def other(tmp_path_factory):
     return path, out
 
 
+@pytest.fixture(scope="module")
+def analysed_once(other, tmp_path_factory):
+    """``other`` analysed (with the conditioning): its figures sealed."""
+    from lonlib.analysis.pipeline import analyse
+
+    out = tmp_path_factory.mktemp("analysed") / "out"
+    shutil.copytree(other[1], out)
+    analyse(out, close_figures=True)
+    return out
+
+
+@pytest.fixture
+def analysed(analysed_once, tmp_path):
+    shutil.copytree(analysed_once, tmp_path / "analysed")
+    return tmp_path / "analysed"
+
+
 def findings(folder: Path) -> list[str]:
     return [str(f) for f in verify_experiment(folder, recordings=False).errors]
 
@@ -479,6 +496,79 @@ def test_a_moved_run_relabelled_with_this_configuration_has_a_broken_chain(small
     digests.write_text(json.dumps(payload))
     assert any("run_0001/digests.json: its chain" in e for e in findings(copy))
     assert_caught(copy, "run_0001/digests.json", small[0])
+
+
+def more_trials(folder: Path, yaml_path: Path) -> None:
+    """Raise ``other``'s cap from 2 to 3 searches: each run goes on by one."""
+    import dataclasses
+
+    config = dataclasses.replace(load_config(yaml_path), max_local_searches=3)
+    run_experiment(config, folder, progress=False, allow_changes=["max_local_searches"])
+
+
+def sealed_figures(folder: Path) -> dict:
+    return json.loads((folder / SEAL_NAME).read_text())["figures"]
+
+
+def stale_note(folder: Path) -> str:
+    pending = dict(check_experiment_seal(folder, read_manifest(folder)).pending)
+    return pending.get("figures", "")
+
+
+def test_an_analysis_without_the_conditioning_keeps_the_earlier_figures_sealed(analysed):
+    from lonlib.analysis.pipeline import analyse
+
+    written = analyse(analysed, close_figures=True, conditioning=False).files
+    assert "figures/replayed.csv" not in {f.relative_to(analysed).as_posix() for f in written}
+    assert "figures/replayed.csv" in sealed_figures(analysed)["files"]
+    check = check_experiment_seal(analysed, read_manifest(analysed))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+
+
+def test_a_figure_the_seal_does_not_list_is_named(analysed):
+    (analysed / "figures" / "extra.png").write_bytes(b"drawn by hand")
+    (analysed / "figures" / "other.html").write_text("<html>")  # HTML pages are not sealed
+    (analysed / "figures" / ".claims.csv.x1.tmp").write_text("half")  # nor temporaries
+    errors = findings(analysed)
+    assert [e for e in errors if "figures/" in e] == [
+        "error: [digest] figures/extra.png: a figure or table the seal does not list (added "
+        "by hand, or written by an analysis that stopped before sealing it: `lonlib analyse` "
+        "again)"
+    ]
+
+
+def test_an_edited_or_missing_figure_is_named(analysed):
+    with open(analysed / "figures" / "metrics.csv", "a") as table:
+        table.write("1,2\n")
+    (analysed / "figures" / "fig2_optima_boxplot.png").unlink()
+    problems = dict(check_experiment_seal(analysed, read_manifest(analysed)).problems)
+    assert problems == {
+        "figures/metrics.csv": "differs from its seal",
+        "figures/fig2_optima_boxplot.png": "a sealed figure or table is missing",
+    }
+
+
+def test_figures_drawn_from_earlier_trials_stay_stale_until_analysed_again(other, analysed, capsys):
+    """More trials make every figure stale; `verify --seal` seals them as drawn from the
+    earlier trials (still stale); an analysis without the conditioning refreshes all but
+    the conditioning's files, a full one all."""
+    from lonlib.analysis.pipeline import analyse
+
+    listed = len(sealed_figures(analysed)["files"])
+    more_trials(analysed, other[0])
+    assert stale_note(analysed).startswith(f"{listed} of {listed} figures and tables")
+    cli_main(["verify", "--seal", str(analysed)])
+    assert "sealed:" in capsys.readouterr().out
+    assert stale_note(analysed).startswith(f"{listed} of {listed} figures and tables")
+    written = analyse(analysed, close_figures=True, conditioning=False).files
+    kept = set(sealed_figures(analysed)["files"]) - {
+        f.relative_to(analysed).as_posix() for f in written
+    }
+    assert "figures/replayed.csv" in kept
+    assert set(sealed_figures(analysed)["inputs_of"]) == kept
+    assert stale_note(analysed).startswith(f"{len(kept)} of {listed} figures and tables")
+    analyse(analysed, close_figures=True)
+    assert stale_note(analysed) == "" and "inputs_of" not in sealed_figures(analysed)
 
 
 def test_status_says_a_folder_is_tampered_and_still_shows_it(small, copy, capsys):
