@@ -172,6 +172,18 @@ def test_removed_last_trials_are_named_and_refused(small, copy):
     assert_caught(copy, "run_0000/trials.parquet", small[0])
 
 
+def test_a_run_resealed_to_its_count_under_the_earlier_root_is_named(small, copy):
+    """A mixed folder: run 0's last trial changed and its digests rebuilt (as sealing
+    another copy would), under the root sealed before: the same count, another head."""
+    from lonlib.storage.digests import seal_runs
+
+    root = (copy / SEAL_NAME).read_text()
+    rewrite_table(copy, 0, lambda t: t.__setitem__("fitness", t["fitness"] + 1e-6))
+    seal_runs(copy, read_manifest(copy))
+    (copy / SEAL_NAME).write_text(root)
+    assert_caught(copy, "run_0000/trials.parquet", small[0])
+
+
 def test_a_removed_run_and_an_edited_setting_are_named(small, copy):
     manifest = copy / "manifest.json"
     manifest.write_text(manifest.read_text().replace('"tolerance": 2', '"tolerance": 3'))
@@ -255,6 +267,7 @@ from lonlib.config import load_config
 from lonlib.experiment.running import run_experiment
 
 pattern, count, original, seen = sys.argv[3], int(sys.argv[4]), atomic.atomic_write, [0]
+allow_changes = sys.argv[5].split(",") if len(sys.argv) > 5 else ()
 
 def write_then_maybe_die(path, data):
     original(path, data)
@@ -265,7 +278,9 @@ def write_then_maybe_die(path, data):
 
 for module in (atomic, digests, trials):
     module.atomic_write = write_then_maybe_die
-run_experiment(load_config(sys.argv[1]), Path(sys.argv[2]), progress=False)
+run_experiment(
+    load_config(sys.argv[1]), Path(sys.argv[2]), progress=False, allow_changes=allow_changes
+)
 """
 
 KILL_POINTS = [
@@ -323,6 +338,16 @@ def test_a_deleted_or_renamed_recording_is_named(tmp_path):
     assert problems[f"recordings/{recordings[0].name}"].endswith("is missing")
     assert problems[f"recordings/{recordings[1].name}"].endswith(f"is renamed to {renamed.name}")
     assert problems[f"recordings/{renamed.name}"] == "not in the recordings index"
+
+
+def test_a_changed_recording_is_named(tmp_path):
+    copy = tmp_path / "reference"
+    shutil.copytree(COMMITTED[0], copy)
+    recording = sorted((copy / "recordings").glob("*.rrd"))[0]
+    with open(recording, "ab") as handle:
+        handle.write(b"\0")
+    problems = dict(check_experiment_seal(copy, read_manifest(copy)).problems)
+    assert problems == {f"recordings/{recording.name}": "differs from its seal"}
 
 
 def test_a_study_folder_is_sealed_file_by_file(tmp_path, capsys):
@@ -569,6 +594,41 @@ def test_figures_drawn_from_earlier_trials_stay_stale_until_analysed_again(other
     assert stale_note(analysed).startswith(f"{len(kept)} of {listed} figures and tables")
     analyse(analysed, close_figures=True)
     assert stale_note(analysed) == "" and "inputs_of" not in sealed_figures(analysed)
+
+
+CHANGE_POINTS = [
+    (SEAL_NAME, 1),  # the root sealed ahead of the manifest with the changed setting
+    ("manifest.json", 1),  # the manifest written, the root not yet
+]
+
+
+@pytest.mark.parametrize("point", CHANGE_POINTS, ids=[f"{p}#{n}" for p, n in CHANGE_POINTS])
+def test_a_sigkill_around_a_changed_setting_leaves_either_accepted(other, tmp_path, point):
+    """A session that raises ``max_local_searches`` seals the new configuration ahead of the
+    manifest (``config_next``): killed after either write, the folder is not tampered, and
+    resuming completes it."""
+    import dataclasses
+
+    import yaml
+
+    out = tmp_path / "changed"
+    shutil.copytree(other[1], out)
+    config = dataclasses.replace(load_config(other[0]), max_local_searches=3)
+    yaml_path = tmp_path / "raised.yaml"
+    yaml_path.write_text(yaml.safe_dump(config.to_dict()))
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    argv = [str(script), str(yaml_path), str(out), point[0], str(point[1]), "max_local_searches"]
+    done = subprocess.run(
+        [sys.executable, *argv], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr[-2000:]
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok, check.problems
+    run_experiment(config, out, progress=False, allow_changes=["max_local_searches"])
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
 
 
 def test_status_says_a_folder_is_tampered_and_still_shows_it(small, copy, capsys):
