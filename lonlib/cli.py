@@ -4,10 +4,13 @@ analyse a stored experiment (figures, tables, the paper's claims), calibrate the
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import os
 import re
 import sys
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -144,6 +147,8 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     from lonlib.experiment.executors import resolve_executor, session_executor
     from lonlib.experiment.lockstep import check_drain, check_lockstep
     from lonlib.sb3 import check_search
+    from lonlib.storage.digests import check_readable
+    from lonlib.storage.layout import read_manifest
     from lonlib.storage.manifest import manifest_path, updated_manifest
 
     kind = resolve_executor(
@@ -164,6 +169,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     check_memory(sized, searches)
     state = _check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
+        check_readable(out, read_manifest(out), "lonlib run")  # what a resume checks first
         manifest = updated_manifest(
             dataclasses.replace(config, executor=kind, slots=slots),
             out,
@@ -201,8 +207,9 @@ def _dry_run_reader(verb: str, root: Path) -> None:
     from lonlib.storage.layout import read_manifest
 
     manifest = read_manifest(root)
-    if verb != "verify":  # a reader refuses changed data; verify reports it
-        check_readable(root, manifest, verb)
+    if verb != "verify":  # a reader refuses changed data (status says so); verify reports it
+        reads = verb != "status"  # status reads the tables, not every trial's files
+        check_readable(root, manifest, f"lonlib {verb}", refuse=reads, files=reads)
     name = manifest["config"].get("name", "?")
     print(f"dry run: lonlib {verb} would read the experiment {name!r} in {root}. Nothing done.")
 
@@ -212,13 +219,37 @@ def _status(args: argparse.Namespace) -> None:
     from lonlib.storage.status import run_status
 
     root = experiment_folder(args.dir)
-    if args.dry_run:
-        return _dry_run_reader("status", root)
-    print(status(args.dir).to_string(index=False))
+    with _seal_warnings_as_lines():
+        if args.dry_run:
+            return _dry_run_reader("status", root)
+        table = status(args.dir)
+        runs = run_status(args.dir) if args.runs else None
+    print(table.to_string(index=False))
     print(_sessions_line(root))
-    if args.runs:
+    if runs is not None:
         with pd.option_context("display.width", 250, "display.max_colwidth", 160):
-            print(run_status(args.dir).to_string(index=False))
+            print(runs.to_string(index=False))
+    return None
+
+
+@contextlib.contextmanager
+def _seal_warnings_as_lines() -> Iterator[None]:
+    """Say what the seal check of a reader that only reports (``lonlib status``) found as
+    ``lonlib: warning: ...`` lines on stderr, each once; other warnings as Python shows them."""
+    from lonlib.storage.digests import TamperedDataWarning, UnsealedDataWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    said = set()
+    for warning in caught:
+        if not issubclass(warning.category, (TamperedDataWarning, UnsealedDataWarning)):
+            warnings.showwarning(
+                warning.message, warning.category, warning.filename, warning.lineno
+            )
+        elif str(warning.message) not in said:
+            said.add(str(warning.message))
+            print(f"lonlib: warning: {warning.message}", file=sys.stderr)
 
 
 def _sessions_line(root: Path) -> str:
@@ -244,7 +275,7 @@ def _lon(args: argparse.Namespace) -> None:
     root = experiment_folder(args.dir)
     if args.dry_run:
         return _dry_run_reader("lon", root)
-    trials = read_finished_trials(root)
+    trials = read_finished_trials(root, reader="lonlib lon")
     table = metrics_table(trials, "max", args.fitness_tolerance)
     with pd.option_context("display.width", 200, "display.max_columns", 30):
         print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))

@@ -1,16 +1,19 @@
 """Hand-written mutation testing: every mutant below changes a result-changing line of the
 DDPG local search, Algorithm 2 or the physics, and ``make test`` must kill it.
 
-``make mutants`` copies the package and the tests into temporary folders and applies one
-mutant at a time to a copy (the working tree is never touched; ``--jobs N`` runs N copies
-at once), runs the test files that guard that module, and reports each mutant as killed or
-SURVIVED; it exits non-zero if any survived or if a mutant's text no longer occurs exactly
-once (keep the list in step with the code). Add a mutant whenever you add a line whose
-change would alter results.
+``make mutants`` copies the package, the tests and the committed data (git's files under
+``data/``, which some guard tests read) into temporary folders and applies one mutant at a
+time to a copy (the working tree is never touched; ``--jobs N`` runs N copies at once), runs
+the test files that guard that module, and reports each mutant as killed or SURVIVED; it
+exits non-zero if any survived or if a mutant's text no longer occurs exactly once (keep the
+list in step with the code). First it runs each set of guard tests on the unmutated copy
+(``--no-baseline`` skips this): a guard that fails there would count every mutant as
+killed. Add a mutant whenever you add a line whose change would alter results.
 """
 
 from __future__ import annotations
 
+import os
 import queue
 import shutil
 import subprocess
@@ -52,6 +55,7 @@ CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.p
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
 DIGESTS, TRIALS = "lonlib/storage/digests.py", "lonlib/storage/trials.py"
+SESSION = "lonlib/storage/session.py"
 JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
 ONE_ROLLOUT = [
@@ -131,13 +135,14 @@ GUARDS = {
     KERNELS: ["tests/task/test_compiled_rollout.py"],
     DIGESTS: ["tests/storage/test_digests.py"],
     TRIALS: ["tests/storage/test_digests.py"],
+    SESSION: ["tests/storage/test_digests.py"],
 }
 
 MUTANTS = [
     # --- digests: each line below is what makes one kind of change visible
     Mutant(
         DIGESTS,
-        'if len(entries) < count or entries[count - 1]["chain"] != head:',
+        'if len(entries) < count or entries[count - 1]["chain"] != run.sealed["head"]:',
         "if len(entries) < count:",
         "the root's chain head is not compared (a run rewritten to its count passes)",
     ),
@@ -170,6 +175,97 @@ MUTANTS = [
         'fitness = float(table["fitness"].iloc[state.incumbent_index])',
         "fitness = float(stored.fitness)",
         "the incumbent on resume takes the optimum file's copy of f*",
+    ),
+    Mutant(
+        DIGESTS,
+        'seal["config_next"] = config_digest(next_manifest)',
+        "pass",
+        "a changed setting is not sealed ahead of its manifest (config_next)",
+    ),
+    Mutant(
+        SESSION,
+        "write_root(out, stored, next_manifest=manifest)",
+        "pass",
+        "a session does not seal the root ahead of its manifest",
+    ),
+    Mutant(
+        DIGESTS,
+        "    elif manifest.get(SEALED_FIELD) is True:",
+        "    elif False:",
+        "a folder that lost its seal and every digest reads as unsealed",
+    ),
+    Mutant(
+        SESSION,
+        "manifest[SEALED_FIELD] = True",
+        "pass",
+        "a new experiment's manifest does not record its seal",
+    ),
+    Mutant(
+        DIGESTS,
+        "    write_root(root, manifest)\n    mark_sealed(root)",
+        "    write_root(root, manifest)",
+        "verify --seal does not record the seal in the manifest",
+    ),
+    Mutant(
+        DIGESTS,
+        "if run.chains is not None and config != run.chains:",
+        "if False:",
+        "a run chained from another configuration passes",
+    ),
+    Mutant(
+        DIGESTS,
+        'return bytes_digest(f"lonlib run {key} config {config}".encode())',
+        'return bytes_digest(f"lonlib run {key}".encode())',
+        "a run's chain starts from its name alone, not its configuration",
+    ),
+    Mutant(
+        DIGESTS,
+        'seal["chain_config"] = chains',
+        "pass",
+        "the root forgets the chains' configuration",
+    ),
+    Mutant(
+        DIGESTS,
+        "        elif file_digest(path) != digest:\n"
+        '            check.problems.append((name, "differs from its seal"))',
+        "        elif False:\n            pass",
+        "a changed figure passes",
+    ),
+    Mutant(
+        DIGESTS,
+        '        if not path.is_file():\n            check.problems.append((name, "a sealed figure',
+        '        if False:\n            check.problems.append((name, "a sealed figure',
+        "a missing figure passes",
+    ),
+    Mutant(
+        DIGESTS,
+        "        if name not in listed:",
+        "        if False:",
+        "a figure the seal does not list passes",
+    ),
+    Mutant(
+        DIGESTS,
+        "stale = [name for name in sorted(listed) if _drawn_from(figures, name) != now]",
+        "stale: list[str] = []",
+        "stale figures are not reported",
+    ),
+    Mutant(
+        DIGESTS,
+        "if name not in files and (root / name).is_file():",
+        "if False:",
+        "an analysis without the conditioning drops the earlier figures from the seal",
+    ),
+    Mutant(
+        DIGESTS,
+        "            if recorded != inputs:\n                drawn[name] = recorded",
+        "            pass",
+        "figures kept from an earlier analysis are sealed as drawn from the current trials",
+    ),
+    Mutant(
+        DIGESTS,
+        "if drawn is None or drawn != now:",
+        "if False:",
+        "verify --seal seals stale figures as drawn from the current trials",
     ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
@@ -975,6 +1071,22 @@ MUTANTS = [
 ]
 
 
+def run_guards(tests: list[str], workdir: Path, python: str) -> str:
+    """Run ``tests`` (pytest, stopping at the first failure) in ``workdir``: "passed",
+    "failed" or "timeout"."""
+    try:
+        proc = subprocess.run(
+            [python, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests],
+            cwd=workdir,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+    except subprocess.TimeoutExpired:
+        return "timeout"
+    return "passed" if proc.returncode == 0 else "failed"
+
+
 def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
     """Apply one mutant inside ``workdir``, run its guard tests, restore; return the outcome."""
     target = workdir / mutant.path
@@ -984,25 +1096,53 @@ def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
     target.write_text(original.replace(mutant.old, mutant.new))
     start = time.perf_counter()
     try:
-        proc = subprocess.run(
-            [python, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *GUARDS[mutant.path]],
-            cwd=workdir,
-            capture_output=True,
-            text=True,
-            timeout=900,
-        )
-        outcome = "killed" if proc.returncode != 0 else "SURVIVED"
-    except subprocess.TimeoutExpired:
-        outcome = "killed (timeout)"
+        outcome = {"passed": "SURVIVED", "failed": "killed", "timeout": "killed (timeout)"}[
+            run_guards(GUARDS[mutant.path], workdir, python)
+        ]
     finally:
         target.write_text(original)
     return outcome, time.perf_counter() - start
 
 
+def copy_committed_data(workdir: Path) -> None:
+    """git's files under ``data/`` (the committed experiments and studies, which guard tests
+    read) into ``workdir``, so that a mutant never reads or writes the working tree's."""
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "data"], cwd=ROOT, capture_output=True, check=True
+    ).stdout
+    for name in filter(None, listed.split(b"\0")):
+        target = workdir / os.fsdecode(name)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / os.fsdecode(name), target)
+
+
+def baseline_failures(
+    selected: list[Mutant], free: queue.Queue[Path], jobs: int, python: str
+) -> list[str]:
+    """The guard test sets of ``selected`` that fail on the unmutated copy."""
+    sets = sorted({tuple(GUARDS[m.path]) for m in selected})
+
+    def one(tests: tuple[str, ...]) -> str:
+        workdir = free.get()
+        try:
+            return run_guards(list(tests), workdir, python)
+        finally:
+            free.put(workdir)
+
+    with ThreadPoolExecutor(jobs) as pool:
+        outcomes = list(pool.map(one, sets))
+    return [
+        " ".join(tests)
+        for tests, outcome in zip(sets, outcomes, strict=True)
+        if outcome != "passed"
+    ]
+
+
 def main(argv: list[str]) -> int:
     """Run every mutant (``--jobs N`` at a time; a word filters by description, ``--path
     TEXT`` by the mutated file's path)."""
-    jobs, where = 1, ""
+    jobs, where, baseline = 1, "", "--no-baseline" not in argv
+    argv = [a for a in argv if a != "--no-baseline"]
     if "--jobs" in argv:
         at = argv.index("--jobs")
         jobs = int(argv[at + 1])
@@ -1013,7 +1153,8 @@ def main(argv: list[str]) -> int:
         argv = argv[:at] + argv[at + 2 :]
     if argv and argv[0] in ("-h", "--help"):
         print(
-            __doc__.strip() + "\n\nusage: python tests/mutants.py [WORDS] [--path TEXT] [--jobs N]"
+            __doc__.strip()
+            + "\n\nusage: python tests/mutants.py [WORDS] [--path TEXT] [--jobs N] [--no-baseline]"
         )
         return 0
     selected = [m for m in MUTANTS if (not argv or argv[0] in m.why) and where in str(m.path)]
@@ -1029,7 +1170,12 @@ def main(argv: list[str]) -> int:
             shutil.copytree(ROOT / "lonlib", workdir / "lonlib")
             shutil.copytree(ROOT / "tests", workdir / "tests")
             shutil.copy(ROOT / "pyproject.toml", workdir)
+            copy_committed_data(workdir)
             free.put(workdir)
+        failing = baseline_failures(selected, free, jobs, sys.executable) if baseline else []
+        if failing:
+            print(f"guard tests fail without any mutant (fix them first): {failing}")
+            return 1
 
         def one(mutant: Mutant) -> tuple[str, float]:
             workdir = free.get()

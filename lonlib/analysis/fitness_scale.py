@@ -7,7 +7,9 @@ same episode (``b_fitness_all``, ``b_fitness_mean``), so the table below is read
 committed experiments' accepted optima, grouped by behaviour label, with the two-cart
 balancing Actor of the hold test (``data/studies/hold-test/actor.npy``) scored by the one
 rollout as the top of the scale. ``python -m lonlib.analysis.fitness_scale`` pastes the table
-into ``docs/results.md``; a test checks that the page holds what this module computes.
+into ``docs/results.md``; a test checks that the page holds what this module computes. What it
+reads is checked against its seal first (:mod:`lonlib.storage.digests`): a changed file stops
+it with one line naming the file.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ import numpy as np
 import pandas as pd
 
 from lonlib.config import PendulumConfig
-from lonlib.storage import read_experiment_trials
+from lonlib.storage import read_finished_trials
+from lonlib.storage.digests import check_files_seal
 from lonlib.task import run_actors
 from lonlib.util.readme_tables import splice
 
@@ -27,6 +30,7 @@ BEGIN = "<!-- fitness-scale:begin (python -m lonlib.analysis.fitness_scale) -->"
 END = "<!-- fitness-scale:end -->"
 EXPERIMENTS = ("data/reference", "data/one-cart")
 BALANCING_ACTOR = "data/studies/hold-test/actor.npy"
+READER = "python -m lonlib.analysis.fitness_scale"
 
 
 def fitness_scale(trials: pd.DataFrame) -> pd.DataFrame:
@@ -59,7 +63,8 @@ def balancing_row(actor: np.ndarray, config: PendulumConfig | None = None) -> di
 
 
 def fitness_scale_markdown(root: Path) -> str:
-    """The docs table: every committed experiment's labels, then the balancing Actor."""
+    """The docs table: every committed experiment's labels, then the balancing Actor (each
+    read once its folder matches its seal: TamperedDataError naming the file otherwise)."""
     lines = [
         "| experiment | behaviour | optima | `all`: median (max) | `mean`: median (max) |",
         "|---|---|---|---|---|",
@@ -73,8 +78,10 @@ def fitness_scale_markdown(root: Path) -> str:
         )
 
     for source in EXPERIMENTS:
-        for row in fitness_scale(read_experiment_trials(root / source)).to_dict("records"):
+        trials = read_finished_trials(root / source, reader=READER)
+        for row in fitness_scale(trials).to_dict("records"):
             lines.append(line(f"`{source}`", row))
+    check_files_seal((root / BALANCING_ACTOR).parent).raise_if_tampered(READER)
     actor = np.load(root / BALANCING_ACTOR)
     lines.append(line(f"`{BALANCING_ACTOR}`", balancing_row(actor)))
     return "\n".join(lines)

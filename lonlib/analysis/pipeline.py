@@ -69,12 +69,13 @@ from lonlib.util.validation import check_range
 
 
 def load_experiment(
-    folder: str | Path, check_seal: bool = True
+    folder: str | Path, check_seal: bool = True, reader: str = "lonlib analyse"
 ) -> tuple[ExperimentConfig, pd.DataFrame]:
     """The stored configuration and all trials of an experiment folder (refused when they
-    no longer match the folder's seal, unless ``check_seal`` is False: ``lonlib verify``)."""
+    no longer match the folder's seal, naming ``reader``, the command that reads, unless
+    ``check_seal`` is False: ``lonlib verify``)."""
     folder = Path(folder)
-    trials = read_finished_trials(folder, check_seal=check_seal)
+    trials = read_finished_trials(folder, check_seal=check_seal, reader=reader)
     return stored_config(folder), trials
 
 
@@ -373,9 +374,10 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
     check_range("limit", limit, 0)
     check_range("bins", bins, 1)
     folder = Path(folder)
-    config, trials = load_experiment(folder)
+    config, trials = load_experiment(folder, reader="lonlib record")
     if is_sealed(folder):  # what the index will list must be what it listed, before any compute
-        check_experiment_seal(folder, read_manifest(folder), figures=False).raise_if_tampered()
+        check = check_experiment_seal(folder, read_manifest(folder), figures=False)
+        check.raise_if_tampered("lonlib record")
     selection = optima_to_record(trials, bins)
     if limit:
         selection = selection.head(limit)

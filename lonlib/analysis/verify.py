@@ -47,11 +47,12 @@ from lonlib.analysis.recordings import recordings_index
 from lonlib.search.algorithm import RunState, Trial, random_networks, search_start
 from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.digests import (
-    FIGURES_FOLDER,
     SealCheck,
     check_experiment_seal,
+    figure_files,
     reseal_outputs,
     seal_runs,
+    stale_figures,
 )
 from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, optimum_path, read_manifest
 from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
@@ -388,8 +389,11 @@ def seal_findings(seal: SealCheck) -> list[Finding]:
 
 def seal_experiment(report: VerifyReport) -> None:
     """Seal the experiment ``report`` verified (``lonlib verify --seal``): every run's trials
-    and files, the recordings index and the figures, as they are. ValueError when the
-    verification failed: a folder is sealed only after a full replay holds."""
+    and files, the recordings index and the figures, as they are, each figure with the
+    inputs it was drawn from (one drawn from an earlier state of the trials, or from trials
+    no seal recorded, stays stale until ``lonlib analyse``); the manifest then records that
+    the folder is sealed. ValueError when the verification failed: a folder is sealed only
+    after a full replay holds."""
     # A seal interrupted part-way (runs sealed, the root not yet) is this command's own
     # state: sealing again completes it. Every other finding stops it.
     if blocks_sealing(report):
@@ -404,16 +408,22 @@ def seal_experiment(report: VerifyReport) -> None:
         raise ValueError(f"{folder}: a sampling session is running; seal it once it ends") from None
     try:
         with exclusive_lock(folder / MANIFEST_LOCK, record_holder=False):
+            stale = stale_figures(folder)  # before the runs' chains are sealed again
             seal_runs(folder, read_manifest(folder))
-        figures = sorted(p for p in (folder / FIGURES_FOLDER).glob("*") if p.is_file())
-        reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
+        reseal_outputs(
+            folder,
+            figures=figure_files(folder),
+            recordings=recordings_index(folder),
+            stale_figures=stale,
+        )
     finally:
         sampling.release()
 
 
 def blocks_sealing(report: VerifyReport) -> bool:
-    """Whether ``report`` has an error other than this command's own interrupted seal (runs
-    sealed, the root not yet), which sealing again completes."""
+    """Whether ``report`` has an error other than a missing root seal (this command's own
+    interrupted seal, runs sealed and the root not yet, or a seal removed with the runs'
+    digests to accept a deliberate change), which sealing after a full replay completes."""
     return any(not _interrupted_seal(finding) for finding in report.errors)
 
 

@@ -10,14 +10,22 @@ Layout (beside :mod:`lonlib.storage.layout`)::
 
     data/<experiment>/seal.json              the root: the configuration's digest, each run's
                                              trial count and chain head, the recordings
-                                             index, the figures and their inputs' digest
+                                             index, the figures and the inputs they were
+                                             drawn from, the chains' configuration
     p=<p>/run_<run>/digests.json             the run's chain: per trial, the digest of its
                                              row of the trials table and of its files
                                              (optimum, history)
+    data/<experiment>/manifest.json          ``"sealed": true`` once the folder is sealed
 
-Each run's entries are chained (entry *i* hashes entry *i − 1*'s chain value), and the root
-keeps each run's count and head, so removing a run's last trials (rows, files and entries
-alike) no longer matches the root.
+Each run's entries are chained (entry *i* hashes entry *i − 1*'s chain value) from a start
+made of the run's name and the configuration's digest when the experiment was first sealed
+(``chain_config``, kept in the root and in each run's ``digests.json``), and the root keeps
+each run's count and head, so removing a run's last trials (rows, files and entries alike)
+no longer matches the root, and a run moved in from an experiment of another configuration
+is named. Folders sealed before ``chain_config`` existed keep their chains (started from the
+run's name alone) until they are sealed again from scratch. The manifest records that the
+folder was sealed, so a folder that lost its seal and every run's digests is tampered data,
+not an unsealed one.
 
 **Write order** (each file by atomic rename): a trial's history and optimum, the run's
 ``digests.json`` (the trial sealed ahead), the trials table (the run's commit point), and the
@@ -48,7 +56,7 @@ from typing import Any
 
 import pandas as pd
 
-from lonlib.storage.atomic import CorruptDataError, atomic_write
+from lonlib.storage.atomic import CorruptDataError, atomic_write, read_json, write_json
 
 SEAL_NAME = "seal.json"
 """The root of an experiment's (or a folder's) seal."""
@@ -58,6 +66,8 @@ SEAL_FORMAT = 1
 FIGURES_FOLDER = "figures"
 RECORDINGS_FOLDER = "recordings"
 RUN_FILES = ("optimum_{:04d}.npz", "history_{:04d}.parquet")
+SEALED_FIELD = "sealed"
+"""In the manifest: ``true`` once the folder was sealed (its seal then must be there)."""
 _TRIAL_FILE = re.compile(r"(?:optimum|history)_(\d{4,})\.(?:npz|parquet)")
 """A trial's files in its run's folder (:mod:`lonlib.storage.layout`), by trial index."""
 
@@ -69,6 +79,11 @@ class TamperedDataError(CorruptDataError):
 class UnsealedDataWarning(UserWarning):
     """An experiment written before digests (or never sealed) is read: nothing can say
     whether it changed. ``lonlib verify --seal`` seals it after a full replay."""
+
+
+class TamperedDataWarning(UserWarning):
+    """A reader that only reports (``lonlib status``) read data that no longer match their
+    seal: the message names the file, as :class:`TamperedDataError` does."""
 
 
 def bytes_digest(data: bytes) -> str:
@@ -119,8 +134,12 @@ def _run_key(run_folder: Path, root: Path) -> str:
     return run_folder.relative_to(root).as_posix()
 
 
-def _chain_start(key: str) -> str:
-    return bytes_digest(f"lonlib run {key}".encode())
+def _chain_start(key: str, config: str | None) -> str:
+    """Where a run's chain starts: its name and the configuration it was sealed under
+    (``None``: a chain sealed before ``chain_config`` existed, from the name alone)."""
+    if config is None:
+        return bytes_digest(f"lonlib run {key}".encode())
+    return bytes_digest(f"lonlib run {key} config {config}".encode())
 
 
 def _entry_text(entry: Mapping[str, Any]) -> str:
@@ -128,10 +147,12 @@ def _entry_text(entry: Mapping[str, Any]) -> str:
     return json.dumps(body, sort_keys=True, separators=(",", ":"))
 
 
-def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def _chained(
+    key: str, entries: Iterable[Mapping[str, Any]], config: str | None
+) -> list[dict[str, Any]]:
     """``entries`` with their chain values computed from the run's start (a rewrite sealed
     ahead, ``next``, is kept beside the chain, outside it)."""
-    previous, out = _chain_start(key), []
+    previous, out = _chain_start(key, config), []
     for entry in entries:
         previous = bytes_digest((previous + _entry_text(entry)).encode())
         new = {**{k: entry[k] for k in ("index", "row", "files")}, "chain": previous}
@@ -141,10 +162,22 @@ def _chained(key: str, entries: Iterable[Mapping[str, Any]]) -> list[dict[str, A
     return out
 
 
-def _write_run(folder: Path, root: Path, entries: Iterable[Mapping[str, Any]]) -> None:
-    """Write a run's ``digests.json``: ``entries`` chained from the run's start."""
-    payload = {"format": SEAL_FORMAT, "trials": _chained(_run_key(folder, root), entries)}
+def _write_run(
+    folder: Path, root: Path, entries: Iterable[Mapping[str, Any]], config: str | None
+) -> None:
+    """Write a run's ``digests.json``: ``entries`` chained from the run's start, under the
+    chains' configuration ``config`` (None: a chain of a folder sealed before it existed)."""
+    key = _run_key(folder, root)
+    payload: dict[str, Any] = {"format": SEAL_FORMAT, "trials": _chained(key, entries, config)}
+    if config is not None:
+        payload["config"] = config
     _write(folder / RUN_DIGESTS, payload)
+
+
+def _read_run(path: Path) -> tuple[list[dict[str, Any]], str | None]:
+    """A run's ``digests.json``: its entries and the configuration its chain starts from."""
+    payload = _read(path)
+    return payload["trials"], payload.get("config")
 
 
 def settle_ahead(run_folder: Path, root: Path) -> None:
@@ -153,7 +186,7 @@ def settle_ahead(run_folder: Path, root: Path) -> None:
     path = Path(run_folder) / RUN_DIGESTS
     if not path.exists():
         return
-    entries = _read(path)["trials"]
+    entries, config = _read_run(path)
     if not any(entry.get("next") for entry in entries):
         return
     for entry in entries:
@@ -161,7 +194,7 @@ def settle_ahead(run_folder: Path, root: Path) -> None:
             file = Path(run_folder) / name
             if file.is_file() and file_digest(file) == digest:
                 entry["files"][name] = digest
-    _write_run(Path(run_folder), Path(root), entries)
+    _write_run(Path(run_folder), Path(root), entries, config)
 
 
 def _write(path: Path, payload: Mapping[str, Any]) -> None:
@@ -189,6 +222,8 @@ def _is_digest(value: object) -> bool:
 
 def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
     """What is malformed in a seal (``run``: a run's ``digests.json``), or None."""
+    if "config" in payload and run and not _is_digest(payload["config"]):
+        return "'config' is not a digest"
     if run:
         entries = payload.get("trials")
         if not isinstance(entries, list):
@@ -222,9 +257,14 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
         isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
     ):
         return "'recordings' is not a mapping of recordings to their trial and digest"
+    if "chain_config" in payload and not _is_digest(payload["chain_config"]):
+        return "'chain_config' is not a digest"
     figures = payload.get("figures", {})
     if not isinstance(figures, dict) or not isinstance(figures.get("files", {}), dict):
         return "'figures' is not a mapping"
+    drawn = figures.get("inputs_of", {})
+    if not isinstance(drawn, dict) or not all(v is None or _is_digest(v) for v in drawn.values()):
+        return "'figures.inputs_of' is not a mapping of figures to digests"
     return None
 
 
@@ -241,6 +281,15 @@ def config_digest(manifest: Mapping[str, Any]) -> str:
 # ----------------------------------------------------------------------------- writers
 
 
+def _chains_config(old: Mapping[str, Any], manifest: Mapping[str, Any]) -> str | None:
+    """The configuration digest the runs' chains start from: the current root's (None in a
+    folder sealed before it existed), or the configuration's for a folder sealed now."""
+    if old:
+        value = old.get("chain_config")
+        return value if isinstance(value, str) else None
+    return config_digest(manifest)
+
+
 def append_trial(
     run_folder: Path, root: Path, table_bytes: bytes, files: Mapping[str, bytes]
 ) -> None:
@@ -250,7 +299,10 @@ def append_trial(
     if not is_sealed(root):
         return
     path = run_folder / RUN_DIGESTS
-    entries = _read(path)["trials"] if path.exists() else []
+    if path.exists():
+        entries, config = _read_run(path)
+    else:  # the run's first trial: its chain starts from the root's configuration
+        entries, config = [], _read(Path(root) / SEAL_NAME).get("chain_config")
     rows = table_row_digests(table_bytes)
     index = len(rows) - 1
     # an entry ahead of a table that was never written (a kill between the two) is replaced
@@ -261,7 +313,7 @@ def append_trial(
         )
     files_part = {name: bytes_digest(data) for name, data in sorted(files.items())}
     entries.append({"index": index, "row": rows[index], "files": files_part})
-    _write_run(run_folder, root, entries)
+    _write_run(run_folder, root, entries, config)
 
 
 def _run_folders(root: Path) -> list[Path]:
@@ -272,7 +324,7 @@ def _sealed_runs(root: Path) -> dict[str, dict[str, Any]]:
     """Each run's sealed count and chain head, from its ``digests.json``."""
     runs = {}
     for folder in sorted(p.parent for p in root.glob(f"p=*/run_*/{RUN_DIGESTS}")):
-        entries = _read(folder / RUN_DIGESTS)["trials"]
+        entries, _ = _read_run(folder / RUN_DIGESTS)
         if entries:
             runs[_run_key(folder, root)] = {"trials": len(entries), "head": entries[-1]["chain"]}
     return runs
@@ -285,21 +337,77 @@ def inputs_digest(seal: Mapping[str, Any]) -> str:
     return bytes_digest(json.dumps(body, sort_keys=True).encode())
 
 
+def _inputs_now(root: Path, seal: Mapping[str, Any]) -> str:
+    """:func:`inputs_digest` of the trials as the runs' chains hold them now (a session may
+    have sealed trials the root does not count yet)."""
+    return inputs_digest({"config": seal.get("config"), "runs": _sealed_runs(root)})
+
+
+def figure_files(root: Path) -> list[Path]:
+    """The files of an experiment's figures folder that its seal covers: all but the 3-D
+    LON's HTML pages (kept out of git) and hidden files (temporaries)."""
+    folder = Path(root) / FIGURES_FOLDER
+    if not folder.is_dir():
+        return []
+    return sorted(
+        p
+        for p in folder.iterdir()
+        if p.is_file() and p.suffix != ".html" and not p.name.startswith(".")
+    )
+
+
+def _drawn_from(figures: Mapping[str, Any], name: str) -> str | None:
+    """The inputs digest a sealed figure was drawn from (None: not recorded)."""
+    drawn = figures.get("inputs_of", {})
+    if name in drawn:
+        value = drawn[name]
+    else:
+        value = figures.get("inputs")
+    return value if isinstance(value, str) else None
+
+
+def _figures_seal(
+    root: Path,
+    inputs: str,
+    old: Mapping[str, Any] | None,
+    written: Iterable[Path],
+    stale: Mapping[str, str | None],
+) -> dict[str, Any]:
+    """The root's figures: the files ``written`` (their digests; drawn from ``inputs`` but
+    for those ``stale`` names, drawn from the inputs given there), and the files of an
+    earlier analysis that are still there and were not written again, as they were sealed
+    (digest and inputs): an analysis without the conditioning keeps the conditioning's."""
+    files = {Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in written}
+    drawn = {name: stale[name] for name in files if name in stale}
+    for name, digest in (old or {}).get("files", {}).items():
+        if name not in files and (root / name).is_file():
+            files[name] = digest
+            recorded = _drawn_from(old or {}, name)
+            if recorded != inputs:
+                drawn[name] = recorded
+    entry: dict[str, Any] = {"inputs": inputs, "files": dict(sorted(files.items()))}
+    if drawn:
+        entry["inputs_of"] = dict(sorted(drawn.items()))
+    return entry
+
+
 def write_root(
     root: Path,
     manifest: Mapping[str, Any],
     *,
     recordings: Mapping[str, Mapping[str, Any]] | None = None,
     figures: Iterable[Path] | None = None,
+    stale_figures: Mapping[str, str | None] | None = None,
     next_manifest: Mapping[str, Any] | None = None,
 ) -> None:
     """Write the root seal from the runs' chains as they are now, the manifest's
     configuration, and (given) the recordings index (file name → its trial's ``p``, ``run``,
     ``index``, ``fitness``) or the figures just written (their digests and their inputs'
-    digest); what is not given is kept from the current root. ``next_manifest``: a manifest
-    about to replace ``manifest`` with changed settings (sealed ahead, so that a kill between
-    the two writes leaves either accepted). The caller holds the manifest lock and has
-    checked what it read."""
+    digest, merged with the earlier figures still there; ``stale_figures``: those among them
+    drawn from other inputs, name → that digest or None); what is not given is kept from the
+    current root. ``next_manifest``: a manifest about to replace ``manifest`` with changed
+    settings (sealed ahead, so that a kill between the two writes leaves either accepted).
+    The caller holds the manifest lock and has checked what it read."""
     root = Path(root)
     old = _read(root / SEAL_NAME) if is_sealed(root) else {}
     seal: dict[str, Any] = {
@@ -308,6 +416,9 @@ def write_root(
         "config": config_digest(manifest),
         "runs": _sealed_runs(root),
     }
+    chains = _chains_config(old, manifest)
+    if chains is not None:
+        seal["chain_config"] = chains
     if next_manifest is not None and config_digest(next_manifest) != seal["config"]:
         seal["config_next"] = config_digest(next_manifest)
     if recordings is not None:
@@ -319,12 +430,9 @@ def write_root(
     elif "recordings" in old:
         seal["recordings"] = old["recordings"]
     if figures is not None:
-        seal["figures"] = {
-            "inputs": inputs_digest(seal),
-            "files": {
-                Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in sorted(figures)
-            },
-        }
+        seal["figures"] = _figures_seal(
+            root, inputs_digest(seal), old.get("figures"), figures, stale_figures or {}
+        )
     elif "figures" in old:
         seal["figures"] = old["figures"]
     _write(root / SEAL_NAME, seal)
@@ -338,10 +446,23 @@ def refresh_root(root: Path, manifest: Mapping[str, Any]) -> None:
         write_root(root, manifest)
 
 
+def mark_sealed(root: Path) -> None:
+    """Record in the folder's manifest that it is sealed (:data:`SEALED_FIELD`), so that a
+    seal lost later reads as tampered data, not as a folder written before digests. The
+    caller holds the manifest lock."""
+    path = Path(root) / "manifest.json"
+    manifest = read_json(path)
+    if manifest.get(SEALED_FIELD) is not True:
+        write_json(path, {**manifest, SEALED_FIELD: True})
+
+
 def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
     """Seal every run of ``root`` as it is now (``lonlib verify --seal``, after a full
-    replay; never silently): each run's chain from its table and files, then the root."""
+    replay; never silently): each run's chain from its table and files (from the current
+    root's chain configuration, so that a seal killed part-way is completed by sealing
+    again), then the root, then the mark in the manifest (:func:`mark_sealed`)."""
     root = Path(root)
+    config = _chains_config(_read(root / SEAL_NAME) if is_sealed(root) else {}, manifest)
     for folder in _run_folders(root):
         table_bytes = (folder / "trials.parquet").read_bytes()
         entries = []
@@ -350,8 +471,26 @@ def seal_runs(root: Path, manifest: Mapping[str, Any]) -> None:
             entries.append(
                 {"index": index, "row": row, "files": {n: file_digest(folder / n) for n in names}}
             )
-        _write_run(folder, root, entries)
+        _write_run(folder, root, entries, config)
     write_root(root, manifest)
+    mark_sealed(root)
+
+
+def stale_figures(root: Path) -> dict[str, str | None]:
+    """The figure files of ``root`` (:func:`figure_files`) that were not drawn from its trials
+    as they are now: name → the inputs digest its seal recorded (None: never recorded).
+    ``lonlib verify --seal`` seals them so, and they stay stale until ``lonlib analyse``."""
+    root = Path(root)
+    seal = _read(root / SEAL_NAME) if is_sealed(root) else {}
+    figures = seal.get("figures", {})
+    now = _inputs_now(root, seal) if seal else None
+    out: dict[str, str | None] = {}
+    for path in figure_files(root):
+        name = path.relative_to(root).as_posix()
+        drawn = _drawn_from(figures, name) if name in figures.get("files", {}) else None
+        if drawn is None or drawn != now:
+            out[name] = drawn
+    return out
 
 
 def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
@@ -366,12 +505,12 @@ def seal_ahead(root: Path, digests: Mapping[Path, str]) -> None:
         path = folder / RUN_DIGESTS
         if not path.exists():
             continue
-        entries = _read(path)["trials"]
+        entries, config = _read_run(path)
         for entry in entries:
             ahead = {n: d for n, d in names.items() if n in entry["files"]}
             if ahead:
                 entry["next"] = {**entry.get("next", {}), **ahead}
-        _write_run(folder, root, entries)
+        _write_run(folder, root, entries, config)
 
 
 def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path]) -> None:
@@ -385,12 +524,12 @@ def reseal_files(root: Path, manifest: Mapping[str, Any], paths: Iterable[Path])
         digests = folder / RUN_DIGESTS
         if not digests.exists():
             continue
-        entries = _read(digests)["trials"]
+        entries, config = _read_run(digests)
         names = {p.name: file_digest(p) for p in changed}
         for entry in entries:
             entry["files"] = {n: names.get(n, d) for n, d in entry["files"].items()}
             entry.pop("next", None)
-        _write_run(folder, root, entries)
+        _write_run(folder, root, entries, config)
     write_root(root, manifest)
 
 
@@ -399,11 +538,14 @@ def reseal_outputs(
     *,
     figures: Iterable[Path] | None = None,
     recordings: Mapping[str, Mapping[str, Any]] | None = None,
+    stale_figures: Mapping[str, str | None] | None = None,
 ) -> bool:
     """After ``lonlib analyse`` (``figures``: the files it wrote; its HTML pages, kept out of
-    git, are left out) or ``lonlib record`` (``recordings``: the index of every recording
-    in the folder): their digests in the root seal, under the manifest lock. Nothing in an
-    unsealed folder (returns False)."""
+    git, are left out; the earlier figures still there are kept, :func:`write_root`) or
+    ``lonlib record`` (``recordings``: the index of every recording in the folder): their
+    digests in the root seal, under the manifest lock. ``stale_figures``: figures not drawn
+    from the trials as they are (``lonlib verify --seal``, :func:`stale_figures`). Nothing
+    in an unsealed folder (returns False)."""
     from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
     from lonlib.storage.lock import exclusive_lock
 
@@ -412,7 +554,13 @@ def reseal_outputs(
         return False
     kept = None if figures is None else [Path(f) for f in figures if Path(f).suffix != ".html"]
     with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
-        write_root(root, read_manifest(root), recordings=recordings, figures=kept)
+        write_root(
+            root,
+            read_manifest(root),
+            recordings=recordings,
+            figures=kept,
+            stale_figures=stale_figures,
+        )
     return True
 
 
@@ -437,31 +585,44 @@ class SealCheck:
         """No tampered data (pending writes allowed)."""
         return not self.problems
 
-    def raise_if_tampered(self) -> None:
-        """TamperedDataError with one line naming the first file that differs."""
+    def message(self, reader: str | None = None, refused: bool = True) -> str:
+        """One line naming the first file that differs and ``reader``, the command that
+        stops on it (``refused``) or reads it all the same, pointing to ``lonlib verify``;
+        empty when nothing differs."""
+        if not self.problems:
+            return ""
+        name, what = self.problems[0]
+        more = f" (and {len(self.problems) - 1} more)" if len(self.problems) > 1 else ""
+        said = ""
+        if reader:
+            said = f", so `{reader}` stops" if refused else f" (`{reader}` shows it as it is)"
+        return (
+            f"{self.folder / name}: {what}{more}; the data no longer matches its seal{said}: "
+            f"`lonlib verify {self.folder}` lists every difference"
+        )
+
+    def raise_if_tampered(self, reader: str | None = None) -> None:
+        """TamperedDataError with one line naming the first file that differs (and
+        ``reader``, the command that refuses it)."""
         if self.problems:
-            name, what = self.problems[0]
-            more = f" (and {len(self.problems) - 1} more)" if len(self.problems) > 1 else ""
-            raise TamperedDataError(
-                f"{self.folder / name}: {what}{more}; the data no longer matches its seal: "
-                f"`lonlib verify {self.folder}` lists every difference"
-            )
+            raise TamperedDataError(self.message(reader))
 
 
 def check_experiment_seal(
-    root: Path, manifest: Mapping[str, Any], *, figures: bool = True, recordings: bool = True
+    root: Path,
+    manifest: Mapping[str, Any],
+    *,
+    figures: bool = True,
+    recordings: bool = True,
+    files: bool = True,
 ) -> SealCheck:
     """Compare an experiment folder with its seal: configuration, each run's trials (rows,
-    files, chain, count against the root), and (asked) the recordings and figures."""
+    chain, count against the root and, with ``files``, the trials' files), and (asked) the
+    recordings and figures."""
     root = Path(root)
     check = SealCheck(root, is_sealed(root))
     if not check.sealed:
-        chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
-        if chained:  # written with digests: a lost root is not an old experiment
-            check.sealed = True
-            check.problems.append(
-                (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
-            )
+        _check_lost_seal(check, root, manifest)
         return check
     try:
         seal = _read(root / SEAL_NAME)
@@ -478,7 +639,8 @@ def check_experiment_seal(
     for key in sorted(set(sealed_runs) - set(folders)):
         check.problems.append((f"{key}/trials.parquet", "a sealed run's trials table is missing"))
     for key, folder in folders.items():
-        _check_run(check, root, key, folder, sealed_runs.get(key))
+        run = _SealedRun(key, folder, sealed_runs.get(key), seal.get("chain_config"))
+        _check_run(check, run, files)
     if recordings:
         _check_recordings(check, root, seal.get("recordings"))
     if figures:
@@ -486,35 +648,115 @@ def check_experiment_seal(
     return check
 
 
-def _check_run(
-    check: SealCheck, root: Path, key: str, folder: Path, sealed: Mapping[str, Any] | None
-) -> None:
-    digests = folder / RUN_DIGESTS
-    try:
-        entries = _read(digests)["trials"] if digests.exists() else []
-    except TamperedDataError as error:
-        check.problems.append((f"{key}/{RUN_DIGESTS}", str(error).split(": ", 1)[-1]))
-        return
-    if [e.get("chain") for e in entries] != [e["chain"] for e in _chained(key, entries)]:
-        check.problems.append((f"{key}/{RUN_DIGESTS}", "its chain of trial digests is broken"))
-        return
-    count = 0 if sealed is None else int(sealed["trials"])
-    if sealed is not None:
-        head = sealed["head"]
-        if len(entries) < count or entries[count - 1]["chain"] != head:
-            check.problems.append(
-                (
-                    f"{key}/trials.parquet",
-                    f"the seal holds {count} trials of this run and they are not all here "
-                    f"({len(entries)} sealed in the run): trials were removed or rewritten",
-                )
+def _check_lost_seal(check: SealCheck, root: Path, manifest: Mapping[str, Any]) -> None:
+    """A folder without its root seal: tampered if its runs hold digests or its manifest
+    records that it was sealed (a lost seal is not an old experiment), else unsealed."""
+    chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
+    if chained:  # written with digests: a lost root is not an old experiment
+        check.sealed = True
+        check.problems.append(
+            (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
+        )
+    elif manifest.get(SEALED_FIELD) is True:
+        check.sealed = True
+        check.problems.append(
+            (
+                SEAL_NAME,
+                "missing, while the manifest records that the folder was sealed (the seal and "
+                "every run's digests are gone)",
             )
-            return
+        )
+
+
+@dataclass(frozen=True)
+class _SealedRun:
+    """A run's folder as the root seals it: ``sealed`` its count and head (None: not in the
+    root), ``chains`` the configuration its chain must start from (None: a root sealed
+    before chain configurations, which accepts the run's own)."""
+
+    key: str
+    folder: Path
+    sealed: Mapping[str, Any] | None
+    chains: str | None
+
+
+def _check_run(check: SealCheck, run: _SealedRun, files: bool) -> None:
+    # the table before the digests: a trial appended meanwhile then reads as sealed ahead
+    table = run.folder / "trials.parquet"
     try:
-        rows = table_row_digests((folder / "trials.parquet").read_bytes())
-    except Exception as error:  # pyarrow raises several types for a damaged file
-        check.problems.append((f"{key}/trials.parquet", f"cannot be read ({error})"))
+        table_bytes: bytes | None = table.read_bytes()
+    except OSError:
+        table_bytes = None
+    entries = _run_entries(check, run)
+    if entries is None or not _check_head(check, run, entries):
         return
+    try:
+        if table_bytes is None:
+            raise OSError("cannot read the file")
+        rows = table_row_digests(table_bytes)
+    except Exception as error:  # pyarrow raises several types for a damaged file
+        check.problems.append((f"{run.key}/trials.parquet", f"cannot be read ({error})"))
+        return
+    _check_rows(check, run, entries, rows)
+    if files:
+        _check_trial_files(check, run, entries[: len(rows)])
+    check.sealed_trials[run.key] = min(len(entries), len(rows))
+    _check_stray_files(check, run, entries, len(rows))
+
+
+def _run_entries(check: SealCheck, run: _SealedRun) -> list[dict[str, Any]] | None:
+    """A run's sealed entries, once its chain holds from the experiment's start (None,
+    the problem noted, when it does not)."""
+    digests = run.folder / RUN_DIGESTS
+    name = f"{run.key}/{RUN_DIGESTS}"
+    if not digests.exists():
+        return []
+    try:
+        entries, config = _read_run(digests)
+    except TamperedDataError as error:
+        check.problems.append((name, str(error).split(": ", 1)[-1]))
+        return None
+    if run.chains is not None and config != run.chains:
+        check.problems.append(
+            (
+                name,
+                "chained from another configuration than this experiment's (another "
+                "experiment's run?)",
+            )
+        )
+        return None
+    if [e.get("chain") for e in entries] != [
+        e["chain"] for e in _chained(run.key, entries, config)
+    ]:
+        check.problems.append((name, "its chain of trial digests is broken"))
+        return None
+    return entries
+
+
+def _check_head(check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]]) -> bool:
+    """Whether the run still holds the trials the root counts, up to its head (else the
+    problem is noted)."""
+    if run.sealed is None:
+        return True
+    count = int(run.sealed["trials"])
+    if len(entries) < count or entries[count - 1]["chain"] != run.sealed["head"]:
+        check.problems.append(
+            (
+                f"{run.key}/trials.parquet",
+                f"the seal holds {count} trials of this run and they are not all here "
+                f"({len(entries)} sealed in the run): trials were removed or rewritten",
+            )
+        )
+        return False
+    return True
+
+
+def _check_rows(
+    check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]], rows: list[str]
+) -> None:
+    """The table's rows against the run's entries and the root's count."""
+    key = run.key
+    count = 0 if run.sealed is None else int(run.sealed["trials"])
     if len(rows) < count:
         check.problems.append(
             (f"{key}/trials.parquet", f"holds {len(rows)} trials, the seal holds {count}")
@@ -532,14 +774,6 @@ def _check_run(
             check.problems.append(
                 (f"{key}/trials.parquet", f"trial {entry['index']}'s row differs from its seal")
             )
-    for entry in entries[: len(rows)]:
-        for name, digest in entry["files"].items():
-            path = folder / name
-            accepted = (digest, entry.get("next", {}).get(name))  # a rewrite sealed ahead
-            if not path.is_file():
-                check.problems.append((f"{key}/{name}", "a sealed file is missing"))
-            elif file_digest(path) not in accepted:
-                check.problems.append((f"{key}/{name}", "differs from its seal"))
     if len(rows) > len(entries):
         check.problems.append(
             (
@@ -557,17 +791,34 @@ def _check_run(
                 "`lonlib verify --seal` records them",
             )
         )
-    check.sealed_trials[key] = min(len(entries), len(rows))
-    sealed_names = {n for e in entries[: len(rows)] for n in e["files"]}
-    for path in sorted(folder.iterdir()):
+
+
+def _check_trial_files(check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]]) -> None:
+    """Each sealed trial's files (optimum, history) against their digests."""
+    for entry in entries:
+        for name, digest in entry["files"].items():
+            path = run.folder / name
+            accepted = (digest, entry.get("next", {}).get(name))  # a rewrite sealed ahead
+            if not path.is_file():
+                check.problems.append((f"{run.key}/{name}", "a sealed file is missing"))
+            elif file_digest(path) not in accepted:
+                check.problems.append((f"{run.key}/{name}", "differs from its seal"))
+
+
+def _check_stray_files(
+    check: SealCheck, run: _SealedRun, entries: list[dict[str, Any]], rows: int
+) -> None:
+    """A trial's file no seal lists: a leftover of a trial the table lacks (pending), or
+    tampered data."""
+    sealed_names = {n for e in entries[:rows] for n in e["files"]}
+    for path in sorted(run.folder.iterdir()):
         match = _TRIAL_FILE.fullmatch(path.name)
         if match is None or path.name in sealed_names:
             continue  # not a trial's file (a temporary, the table, the lock), or sealed
-        index = int(match.group(1))
-        if index >= len(rows):
-            check.pending.append((f"{key}/{path.name}", "a leftover of an unsealed trial"))
+        if int(match.group(1)) >= rows:
+            check.pending.append((f"{run.key}/{path.name}", "a leftover of an unsealed trial"))
         else:
-            check.problems.append((f"{key}/{path.name}", "a file no seal lists"))
+            check.problems.append((f"{run.key}/{path.name}", "a file no seal lists"))
 
 
 def _check_recordings(
@@ -602,39 +853,67 @@ def _check_recordings(
 
 
 def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> None:
-    figures = seal.get("figures")
-    if figures is None:
-        return
-    for name, digest in sorted(figures.get("files", {}).items()):
+    """The sealed figures and tables (each there and unchanged), the files of the figures
+    folder the seal does not list, and whether they were drawn from the trials as they are."""
+    figures = seal.get("figures") or {}
+    listed = dict(figures.get("files", {}))
+    for name, digest in sorted(listed.items()):
         path = root / name
         if not path.is_file():
             check.problems.append((name, "a sealed figure or table is missing"))
         elif file_digest(path) != digest:
             check.problems.append((name, "differs from its seal"))
-    if figures.get("inputs") != inputs_digest(seal):
+    for path in figure_files(root):
+        name = path.relative_to(root).as_posix()
+        if name not in listed:
+            check.problems.append(
+                (
+                    name,
+                    "a figure or table the seal does not list (added by hand, or written by an "
+                    "analysis that stopped before sealing it: `lonlib analyse` again)",
+                )
+            )
+    now = _inputs_now(root, seal) if listed else None
+    stale = [name for name in sorted(listed) if _drawn_from(figures, name) != now]
+    if stale:
         check.pending.append(
             (
                 FIGURES_FOLDER,
-                "made from an earlier state of the trials (stale): `lonlib analyse` again",
+                f"{len(stale)} of {len(listed)} figures and tables ({stale[0]}"
+                f"{', ...' if len(stale) > 1 else ''}) made from an earlier state of the "
+                "trials (stale): `lonlib analyse` again",
             )
         )
 
 
-def check_readable(root: Path, manifest: Mapping[str, Any], verb: str) -> SealCheck:
-    """A reader's gate (``lonlib run`` on resume, ``analyse``, ``record``, ``thin``): stop
-    with one line naming the file that differs from the seal, before any compute; warn
-    (:class:`UnsealedDataWarning`) when the folder has no seal. Figures and recordings are
-    checked by ``lonlib verify`` (a reader of trials does not read them)."""
-    check = check_experiment_seal(root, manifest, figures=False, recordings=False)
+def check_readable(
+    root: Path,
+    manifest: Mapping[str, Any],
+    reader: str = "lonlib analyse",
+    *,
+    refuse: bool = True,
+    files: bool = True,
+) -> SealCheck:
+    """A reader's gate (``lonlib run`` on resume, ``analyse``, ``lon``, ``record``,
+    ``thin``; ``reader`` names it in the message): stop with one line naming the file that
+    differs from the seal, before any compute; warn (:class:`UnsealedDataWarning`) when the
+    folder has no seal. A reader that only reports (``lonlib status``: ``refuse`` False)
+    warns instead (:class:`TamperedDataWarning`), and checks what it reads (``files``
+    False: the trials tables and the chains, not every trial's files). Figures and
+    recordings are checked by ``lonlib verify`` (a reader of trials does not read them)."""
+    check = check_experiment_seal(root, manifest, figures=False, recordings=False, files=files)
     if not check.sealed:
         warnings.warn(
-            f"{root}: unsealed (written before digests): `lonlib {verb}` cannot tell whether it "
+            f"{root}: unsealed (written before digests): `{reader}` cannot tell whether it "
             f"changed since it was written; `lonlib verify {root} --seal` seals it after a "
             "full replay",
             UnsealedDataWarning,
             stacklevel=2,
         )
-    check.raise_if_tampered()
+    if refuse:
+        check.raise_if_tampered(reader)
+    elif not check.ok:
+        warnings.warn(check.message(reader, refused=False), TamperedDataWarning, stacklevel=2)
     return check
 
 
@@ -742,28 +1021,32 @@ def drop_unwritten_trials(run_folder: Path, root: Path) -> int:
     path = run_folder / RUN_DIGESTS
     if not is_sealed(root) or not path.exists():
         return 0
-    entries = _read(path)["trials"]
+    entries, config = _read_run(path)
     table = run_folder / "trials.parquet"
     rows = len(table_row_digests(table.read_bytes())) if table.exists() else 0
     if len(entries) <= rows:
         return 0
     kept = entries[:rows]
-    _write_run(run_folder, root, kept)
+    _write_run(run_folder, root, kept, config)
     return len(entries) - rows
 
 
 __all__ = [
     "RUN_DIGESTS",
+    "SEALED_FIELD",
     "SEAL_NAME",
     "SealCheck",
     "TamperedDataError",
+    "TamperedDataWarning",
     "UnsealedDataWarning",
     "append_trial",
     "check_experiment_seal",
     "check_files_seal",
     "check_readable",
+    "figure_files",
     "file_digest",
     "is_sealed",
+    "mark_sealed",
     "reseal_files",
     "reseal_files_if_sealed",
     "reseal_outputs",
@@ -773,6 +1056,7 @@ __all__ = [
     "seal_files",
     "settle_ahead",
     "seal_runs",
+    "stale_figures",
     "drop_unwritten_trials",
     "write_root",
 ]

@@ -104,7 +104,7 @@ def gymnasium_mismatches(folder: str | Path) -> tuple[int, list[str]]:
     from lonlib.storage.layout import read_manifest
     from lonlib.storage.trials import read_experiment_trials
 
-    check_readable(Path(folder), read_manifest(Path(folder)), "verify --gymnasium")
+    check_readable(Path(folder), read_manifest(Path(folder)), "lonlib verify --gymnasium")
     trials = read_experiment_trials(Path(folder))
     accepted = trials[trials["accepted"].astype(bool)]
     mismatches = []

@@ -13,7 +13,13 @@ from typing import Any
 
 from lonlib.config import ExperimentConfig
 from lonlib.storage.atomic import remove_temporary_files, write_json
-from lonlib.storage.digests import check_readable, is_sealed, refresh_root, write_root
+from lonlib.storage.digests import (
+    SEALED_FIELD,
+    check_readable,
+    is_sealed,
+    refresh_root,
+    write_root,
+)
 from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, read_manifest, run_dir
 from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
 from lonlib.storage.manifest import (
@@ -76,7 +82,7 @@ class SamplingSession:
                 remove_temporary_files(out, manifest_path(out).name)
                 new = not manifest_path(out).exists()
                 if not new:  # what is resumed must be what was sealed, before any compute
-                    check_readable(out, read_manifest(out), "run")
+                    check_readable(out, read_manifest(out), "lonlib run")
                 manifest = updated_manifest(config, out, provenance, allow_changes)
                 changed = bool(manifest["sessions"][-1].get("changed"))
                 _hold_sampling_lock(out, manifest, sampling, changed, held_by_another)
@@ -87,9 +93,11 @@ class SamplingSession:
                 recorded = bool(todo) or changed or not manifest_path(out).exists()
                 if recorded:  # a finished experiment stays untouched, unless its settings change
                     # Sealed ahead of the manifest (a new experiment from its start; changed
-                    # settings accepted beside the old), then as written.
+                    # settings accepted beside the old), then as written; the manifest
+                    # records that the folder is sealed (a lost seal is then tampered data).
                     sealed = new or is_sealed(out)
                     if sealed:
+                        manifest[SEALED_FIELD] = True
                         stored = manifest if new else read_manifest(out)
                         write_root(out, stored, next_manifest=manifest)
                     write_json(manifest_path(out), manifest)

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import pandas as pd
 
+from lonlib.storage.digests import check_readable
 from lonlib.storage.inflight import inflight_checkpoints
-from lonlib.storage.layout import stored_config, trials_path
+from lonlib.storage.layout import config_of_manifest, read_manifest, trials_path
 from lonlib.storage.trials import read_trials, replay_trials
 
 
@@ -19,10 +20,15 @@ def run_status(out: str | Path) -> pd.DataFrame:
     saved in a lockstep checkpoint, :mod:`lonlib.experiment.checkpoints`) and its
     ``in_flight_steps``
     (env steps; the most any checkpoint holds); and ``fitness``, the chain of stored fitness
-    values with ``x`` after each rejected one. Reads the trials and the manifest only: an
-    optimum file that is missing or damaged shows when the run resumes, not here."""
+    values with ``x`` after each rejected one. Reads the trials, the manifest and the seal's
+    digests of the rows: tables that no longer match their seal are read all the same, with
+    a :class:`~lonlib.storage.digests.TamperedDataWarning` naming the file (an unsealed
+    folder: an ``UnsealedDataWarning``); an optimum file that is missing or damaged shows
+    when the run resumes or ``lonlib verify`` runs, not here."""
     out = Path(out)
-    config = stored_config(out)
+    manifest = read_manifest(out)
+    check_readable(out, manifest, "lonlib status", refuse=False, files=False)
+    config = config_of_manifest(manifest, out / "manifest.json")
     saved: dict[tuple[float, int], int] = {}
     for checkpoint in inflight_checkpoints(out):
         for key, steps in zip(checkpoint.runs, checkpoint.steps, strict=True):

@@ -92,7 +92,7 @@ def thin_histories(folder: str | Path, dry_run: bool = False) -> ThinReport:
             f"{linked[0]}: a symbolic link in an experiment's run folder; thin rewrites files "
             "in place and follows no link: copy the experiment instead of linking its files"
         )
-    check_readable(root, manifest, "thin")  # before any file is rewritten
+    check_readable(root, manifest, "lonlib thin")  # before any file is rewritten
     files = sorted(root.glob(HISTORY_GLOB))
     plans = []
     thinned = rows_before = rows_after = bytes_before = bytes_after = 0

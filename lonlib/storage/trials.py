@@ -178,15 +178,18 @@ def read_experiment_trials(root: Path) -> pd.DataFrame:
     return table.sort_values(["p", "run", "index"], ignore_index=True)
 
 
-def read_finished_trials(root: Path, check_seal: bool = True) -> pd.DataFrame:
+def read_finished_trials(
+    root: Path, check_seal: bool = True, reader: str = "lonlib analyse"
+) -> pd.DataFrame:
     """:func:`read_experiment_trials` of a folder that must hold an experiment with at least
     one finished local search: MissingExperimentError (no manifest) or ValueError otherwise,
     both naming the folder. With ``check_seal`` (every reader but ``lonlib verify``, which
     reports what differs instead) data that no longer matches its seal is refused first
-    (:func:`lonlib.storage.digests.check_readable`)."""
+    (:func:`lonlib.storage.digests.check_readable`; ``reader``, the command that reads,
+    names it in the message)."""
     manifest = read_manifest(root)
     if check_seal:
-        check_readable(Path(root), manifest, "analyse")
+        check_readable(Path(root), manifest, reader)
     trials = read_experiment_trials(root)
     if trials.empty:
         raise ValueError(f"{root} holds no finished local search yet")

@@ -24,7 +24,9 @@ from lonlib.experiment.running import run_experiment
 from lonlib.storage.digests import (
     RUN_DIGESTS,
     SEAL_NAME,
+    SEALED_FIELD,
     TamperedDataError,
+    TamperedDataWarning,
     UnsealedDataWarning,
     check_experiment_seal,
     check_files_seal,
@@ -53,6 +55,31 @@ def copy(small, tmp_path):
     return tmp_path / "out"
 
 
+@pytest.fixture(scope="module")
+def other(tmp_path_factory):
+    """Another configuration (two searches per run, not three), sampled the same way:
+    (YAML path, folder); its runs end at the cap, so raising it continues them."""
+    _, path, out = sample_small(tmp_path_factory.mktemp("other"), P, 2, "other")
+    return path, out
+
+
+@pytest.fixture(scope="module")
+def analysed_once(other, tmp_path_factory):
+    """``other`` analysed (with the conditioning): its figures sealed."""
+    from lonlib.analysis.pipeline import analyse
+
+    out = tmp_path_factory.mktemp("analysed") / "out"
+    shutil.copytree(other[1], out)
+    analyse(out, close_figures=True)
+    return out
+
+
+@pytest.fixture
+def analysed(analysed_once, tmp_path):
+    shutil.copytree(analysed_once, tmp_path / "analysed")
+    return tmp_path / "analysed"
+
+
 def findings(folder: Path) -> list[str]:
     return [str(f) for f in verify_experiment(folder, recordings=False).errors]
 
@@ -76,6 +103,7 @@ def test_a_new_experiment_is_sealed_and_verifies(small):
     assert check.ok and check.pending == [], (check.problems, check.pending)
     report = verify_experiment(out, recordings=False)
     assert report.ok and report.sealed and report.findings == []
+    assert read_manifest(out)[SEALED_FIELD] is True
 
 
 def rewrite_table(folder, run, change):
@@ -144,6 +172,18 @@ def test_removed_last_trials_are_named_and_refused(small, copy):
     assert_caught(copy, "run_0000/trials.parquet", small[0])
 
 
+def test_a_run_resealed_to_its_count_under_the_earlier_root_is_named(small, copy):
+    """A mixed folder: run 0's last trial changed and its digests rebuilt (as sealing
+    another copy would), under the root sealed before: the same count, another head."""
+    from lonlib.storage.digests import seal_runs
+
+    root = (copy / SEAL_NAME).read_text()
+    rewrite_table(copy, 0, lambda t: t.__setitem__("fitness", t["fitness"] + 1e-6))
+    seal_runs(copy, read_manifest(copy))
+    (copy / SEAL_NAME).write_text(root)
+    assert_caught(copy, "run_0000/trials.parquet", small[0])
+
+
 def test_a_removed_run_and_an_edited_setting_are_named(small, copy):
     manifest = copy / "manifest.json"
     manifest.write_text(manifest.read_text().replace('"tolerance": 2', '"tolerance": 3'))
@@ -164,10 +204,18 @@ def test_the_incumbent_on_resume_is_the_tables_fitness(small, copy):
     assert state.incumbent.fitness == table["fitness"].iloc[state.incumbent_index]
 
 
-def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, capsys):
-    (copy / SEAL_NAME).unlink()
-    for path in copy.glob(f"p=*/run_*/{RUN_DIGESTS}"):
+def unseal(folder: Path) -> None:
+    """``folder`` as written before digests: no seal, no run digests, no mark of a seal."""
+    (folder / SEAL_NAME).unlink()
+    for path in folder.glob(f"p=*/run_*/{RUN_DIGESTS}"):
         path.unlink()
+    manifest = json.loads((folder / "manifest.json").read_text())
+    del manifest[SEALED_FIELD]
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
+def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, capsys):
+    unseal(copy)
     with pytest.warns(UnsealedDataWarning, match="unsealed .* --seal"):
         load_experiment(copy)
     report = verify_experiment(copy, recordings=False)
@@ -176,6 +224,7 @@ def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, c
     cli_main(["verify", "--seal", str(copy)])
     assert "sealed:" in capsys.readouterr().out
     assert verify_experiment(copy, recordings=False).findings == []
+    assert read_manifest(copy)[SEALED_FIELD] is True  # losing the seal now is tampering
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_experiment(copy)
@@ -218,6 +267,7 @@ from lonlib.config import load_config
 from lonlib.experiment.running import run_experiment
 
 pattern, count, original, seen = sys.argv[3], int(sys.argv[4]), atomic.atomic_write, [0]
+allow_changes = sys.argv[5].split(",") if len(sys.argv) > 5 else ()
 
 def write_then_maybe_die(path, data):
     original(path, data)
@@ -228,7 +278,9 @@ def write_then_maybe_die(path, data):
 
 for module in (atomic, digests, trials):
     module.atomic_write = write_then_maybe_die
-run_experiment(load_config(sys.argv[1]), Path(sys.argv[2]), progress=False)
+run_experiment(
+    load_config(sys.argv[1]), Path(sys.argv[2]), progress=False, allow_changes=allow_changes
+)
 """
 
 KILL_POINTS = [
@@ -286,6 +338,16 @@ def test_a_deleted_or_renamed_recording_is_named(tmp_path):
     assert problems[f"recordings/{recordings[0].name}"].endswith("is missing")
     assert problems[f"recordings/{recordings[1].name}"].endswith(f"is renamed to {renamed.name}")
     assert problems[f"recordings/{renamed.name}"] == "not in the recordings index"
+
+
+def test_a_changed_recording_is_named(tmp_path):
+    copy = tmp_path / "reference"
+    shutil.copytree(COMMITTED[0], copy)
+    recording = sorted((copy / "recordings").glob("*.rrd"))[0]
+    with open(recording, "ab") as handle:
+        handle.write(b"\0")
+    problems = dict(check_experiment_seal(copy, read_manifest(copy)).problems)
+    assert problems == {f"recordings/{recording.name}": "differs from its seal"}
 
 
 def test_a_study_folder_is_sealed_file_by_file(tmp_path, capsys):
@@ -414,3 +476,204 @@ def test_a_stored_policy_checks_the_seal_and_carries_the_tables_fitness(small, c
     reseal(copy)
     table = pd.read_parquet(trials_path(copy, P, 0))
     assert load_policy(copy, P, 0, 1).fitness == table["fitness"].iloc[1]
+
+
+def test_a_sealed_folder_that_lost_its_seal_and_every_digest_is_refused_not_unsealed(
+    small, copy, capsys
+):
+    """The manifest records the seal: removing it and every run's digests is tampering
+    (named, refused), not a folder written before digests; `verify --seal` after a full
+    replay is still the way to accept a deliberate change."""
+    (copy / SEAL_NAME).unlink()
+    for path in copy.glob(f"p=*/run_*/{RUN_DIGESTS}"):
+        path.unlink()
+    assert any("seal.json: missing, while the manifest" in e for e in findings(copy))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UnsealedDataWarning)
+        with pytest.raises(TamperedDataError, match="seal.json: missing") as caught:
+            load_experiment(copy)
+    assert "\n" not in str(caught.value)
+    cli_main(["verify", "--seal", str(copy)])
+    assert "sealed:" in capsys.readouterr().out
+    assert verify_experiment(copy, recordings=False).findings == []
+
+
+def move_in_other_run(copy: Path, other: Path) -> Path:
+    """``copy`` resealed without its run 1, then ``other``'s run 1 (the same name, another
+    configuration) moved in with its digests: the run's digests.json."""
+    shutil.rmtree(run_dir(copy, P, 1))
+    reseal(copy)
+    shutil.copytree(run_dir(other, P, 1), run_dir(copy, P, 1))
+    return run_dir(copy, P, 1) / RUN_DIGESTS
+
+
+def test_a_run_moved_in_from_an_experiment_of_another_configuration_is_named(small, other, copy):
+    """Not in the root, its chain whole: before chains started from the configuration it
+    read as a session's trials not yet in the root."""
+    move_in_other_run(copy, other[1])
+    assert_caught(copy, "run_0001/digests.json", small[0])
+
+
+def test_a_moved_run_relabelled_with_this_configuration_has_a_broken_chain(small, other, copy):
+    digests = move_in_other_run(copy, other[1])
+    payload = json.loads(digests.read_text())
+    payload["config"] = json.loads((copy / SEAL_NAME).read_text())["chain_config"]
+    digests.write_text(json.dumps(payload))
+    assert any("run_0001/digests.json: its chain" in e for e in findings(copy))
+    assert_caught(copy, "run_0001/digests.json", small[0])
+
+
+def more_trials(folder: Path, yaml_path: Path) -> None:
+    """Raise ``other``'s cap from 2 to 3 searches: each run goes on by one."""
+    import dataclasses
+
+    config = dataclasses.replace(load_config(yaml_path), max_local_searches=3)
+    run_experiment(config, folder, progress=False, allow_changes=["max_local_searches"])
+
+
+def sealed_figures(folder: Path) -> dict:
+    return json.loads((folder / SEAL_NAME).read_text())["figures"]
+
+
+def stale_note(folder: Path) -> str:
+    pending = dict(check_experiment_seal(folder, read_manifest(folder)).pending)
+    return pending.get("figures", "")
+
+
+def test_an_analysis_without_the_conditioning_keeps_the_earlier_figures_sealed(analysed):
+    from lonlib.analysis.pipeline import analyse
+
+    written = analyse(analysed, close_figures=True, conditioning=False).files
+    assert "figures/replayed.csv" not in {f.relative_to(analysed).as_posix() for f in written}
+    assert "figures/replayed.csv" in sealed_figures(analysed)["files"]
+    check = check_experiment_seal(analysed, read_manifest(analysed))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+
+
+def test_a_figure_the_seal_does_not_list_is_named(analysed):
+    (analysed / "figures" / "extra.png").write_bytes(b"drawn by hand")
+    (analysed / "figures" / "other.html").write_text("<html>")  # HTML pages are not sealed
+    (analysed / "figures" / ".claims.csv.x1.tmp").write_text("half")  # nor temporaries
+    errors = findings(analysed)
+    assert [e for e in errors if "figures/" in e] == [
+        "error: [digest] figures/extra.png: a figure or table the seal does not list (added "
+        "by hand, or written by an analysis that stopped before sealing it: `lonlib analyse` "
+        "again)"
+    ]
+
+
+def test_an_edited_or_missing_figure_is_named(analysed):
+    with open(analysed / "figures" / "metrics.csv", "a") as table:
+        table.write("1,2\n")
+    (analysed / "figures" / "fig2_optima_boxplot.png").unlink()
+    problems = dict(check_experiment_seal(analysed, read_manifest(analysed)).problems)
+    assert problems == {
+        "figures/metrics.csv": "differs from its seal",
+        "figures/fig2_optima_boxplot.png": "a sealed figure or table is missing",
+    }
+
+
+def test_figures_drawn_from_earlier_trials_stay_stale_until_analysed_again(other, analysed, capsys):
+    """More trials make every figure stale; `verify --seal` seals them as drawn from the
+    earlier trials (still stale); an analysis without the conditioning refreshes all but
+    the conditioning's files, a full one all."""
+    from lonlib.analysis.pipeline import analyse
+
+    listed = len(sealed_figures(analysed)["files"])
+    more_trials(analysed, other[0])
+    assert stale_note(analysed).startswith(f"{listed} of {listed} figures and tables")
+    cli_main(["verify", "--seal", str(analysed)])
+    assert "sealed:" in capsys.readouterr().out
+    assert stale_note(analysed).startswith(f"{listed} of {listed} figures and tables")
+    written = analyse(analysed, close_figures=True, conditioning=False).files
+    kept = set(sealed_figures(analysed)["files"]) - {
+        f.relative_to(analysed).as_posix() for f in written
+    }
+    assert "figures/replayed.csv" in kept
+    assert set(sealed_figures(analysed)["inputs_of"]) == kept
+    assert stale_note(analysed).startswith(f"{len(kept)} of {listed} figures and tables")
+    analyse(analysed, close_figures=True)
+    assert stale_note(analysed) == "" and "inputs_of" not in sealed_figures(analysed)
+
+
+CHANGE_POINTS = [
+    (SEAL_NAME, 1),  # the root sealed ahead of the manifest with the changed setting
+    ("manifest.json", 1),  # the manifest written, the root not yet
+]
+
+
+@pytest.mark.parametrize("point", CHANGE_POINTS, ids=[f"{p}#{n}" for p, n in CHANGE_POINTS])
+def test_a_sigkill_around_a_changed_setting_leaves_either_accepted(other, tmp_path, point):
+    """A session that raises ``max_local_searches`` seals the new configuration ahead of the
+    manifest (``config_next``): killed after either write, the folder is not tampered, and
+    resuming completes it."""
+    import dataclasses
+
+    import yaml
+
+    out = tmp_path / "changed"
+    shutil.copytree(other[1], out)
+    config = dataclasses.replace(load_config(other[0]), max_local_searches=3)
+    yaml_path = tmp_path / "raised.yaml"
+    yaml_path.write_text(yaml.safe_dump(config.to_dict()))
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    argv = [str(script), str(yaml_path), str(out), point[0], str(point[1]), "max_local_searches"]
+    done = subprocess.run(
+        [sys.executable, *argv], env=env, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr[-2000:]
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok, check.problems
+    run_experiment(config, out, progress=False, allow_changes=["max_local_searches"])
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+
+
+def test_status_says_a_folder_is_tampered_and_still_shows_it(small, copy, capsys):
+    from lonlib.experiment.running import status
+
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    with pytest.warns(TamperedDataWarning, match=r"run_0000/trials.parquet.*`lonlib status`"):
+        status(copy)
+    for argv in (["status", str(copy), "--runs"], ["status", str(copy), "--dry-run"]):
+        cli_main(argv)
+        out, err = capsys.readouterr()
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("lonlib: warning: "), err
+        assert "run_0000/trials.parquet" in lines[0] and "lonlib verify" in lines[0]
+    cli_main(["status", str(copy)])
+    assert "finished" in capsys.readouterr().out
+
+
+def test_the_fitness_scale_checks_what_it_reads(small, copy, tmp_path, monkeypatch):
+    from lonlib.analysis import fitness_scale
+
+    study = tmp_path / "study"
+    study.mkdir()
+    np.save(study / "actor.npy", np.zeros(3))
+    seal_files(study)
+    monkeypatch.setattr(fitness_scale, "EXPERIMENTS", ("out",))
+    monkeypatch.setattr(fitness_scale, "BALANCING_ACTOR", "study/actor.npy")
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    with pytest.raises(TamperedDataError, match="run_0000/trials.parquet.*fitness_scale"):
+        fitness_scale.fitness_scale_markdown(tmp_path)
+    reseal(copy)
+    np.save(study / "actor.npy", np.ones(3))
+    with pytest.raises(TamperedDataError, match="actor.npy: differs"):
+        fitness_scale.fitness_scale_markdown(tmp_path)
+
+
+@pytest.mark.parametrize("verb", ["lon", "analyse", "record", "thin", "run"])
+def test_a_reader_that_refuses_names_its_command(small, copy, verb, capsys):
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    runs = [["run", str(small[0]), "--out", str(copy)]]
+    argvs = runs if verb == "run" else [[verb, str(copy)], [verb, str(copy), "--dry-run"]]
+    if verb == "run":
+        argvs += [[*runs[0], "--dry-run"]]
+    for argv in argvs:
+        with pytest.raises(SystemExit):
+            cli_main(argv)
+        err = capsys.readouterr().err
+        assert "run_0000/trials.parquet" in err and f"`lonlib {verb}` stops" in err, argv
