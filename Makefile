@@ -96,7 +96,7 @@ setup: $(STAMP)
 
 # In TEST_JOBS processes, then the timing-sensitive tests (marker `serial`) alone.
 test: setup $(if $(BROWSER_TEST),$(VENV)/.lab-installed)
-	$(BIN)/python -m pytest -q -n $(TEST_JOBS) -m "not serial"
+	$(BIN)/python -m pytest -q -n $(TEST_JOBS) --dist worksteal -m "not serial"
 	$(BIN)/python -m pytest -q -m serial
 
 # Upstream drift, seen before it reaches a user: a fresh venv with the newest versions
