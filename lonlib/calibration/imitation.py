@@ -15,7 +15,8 @@ copies then see what the one-cart optimum saw on its own track (for two carts th
 far as on one cart): both act alike, the pair moves as one cart and scores the one-cart
 optimum's fitness (measured: every stored one-cart optimum >= 0.976 scores the same on two
 carts). Read with only its own cart's sensors (the inner one included, or the outer one in
-both slots) a copy fails within 40-100 steps: a cart moving away from its own track end no
+both slots) a copy ends the episode early (the tether tightens or the carts collide, within
+the first 50 steps from the nominal start): a cart moving away from its own track end no
 longer sees the end it moves towards.
 
 **The student** is trained by DAgger (Ross et al. 2011): the teacher's episodes first, then
