@@ -313,6 +313,31 @@ def hold(arm: str | None = None, p: float | None = None, carts: int | None = Non
     ]
 
 
+# the Gymnasium worked examples (data/gymnasium/)
+
+
+@cache
+def gym_trials(name: str) -> pd.DataFrame:
+    from lonlib.storage.trials import read_finished_trials
+
+    return read_finished_trials(ROOT / "data" / "gymnasium" / name)
+
+
+def gym_metrics(name: str) -> pd.DataFrame:
+    """Each p's LON metrics, computed from the stored trials (as ``lonlib analyse`` does)."""
+    from lonlib.analysis.landscape import StoredExperiment
+    from lonlib.lon.metrics import lon_metrics
+
+    experiment = StoredExperiment.load(ROOT / "data" / "gymnasium" / name)
+    rows = [{"p": p, **lon_metrics(land.graph)} for p, land in experiment.landscapes.items()]
+    return pd.DataFrame(rows).set_index("p")
+
+
+def gym_sampling_minutes(name: str) -> float:
+    sessions = read_manifest(ROOT / "data" / "gymnasium" / name)["sessions"]
+    return sum(s["seconds"] for s in sessions) / 60
+
+
 def judged_near(record: dict, steps: int) -> float:
     """The judged fitness of a hold-test search nearest ``steps`` env steps."""
     at = int(np.argmin(np.abs(np.asarray(record["judged_env_steps"]) - steps)))
@@ -1101,6 +1126,37 @@ NUMBERS = [
         lambda: (
             len(hold()),
             sum(r["judged_fitness"][0] < 0.1 for r in hold(carts=2)),
+        ),
+    ),
+    # docs/your-task.md
+    Number(
+        "docs/your-task.md",
+        "2 × {} runs of at most {} local searches, {} local searches in all ({} at p = 0.001, {} "
+        "at p = 0.0001), {:.2f}M env steps, sampled in {:.0f} minutes on one core. **Every run "
+        "ends at the top:** each run's best optimum scores {:.4f}–{:.4f} (a greedy return of "
+        "about {:.0f} from the evaluation start: the pendulum swung up and held), and {} of "
+        "the {} optima score ≥ 0.9. Accepted steps improve the fitness only in the fourth or "
+        "fifth decimal, so T = 5 rarely ends a run: {} of the {} runs took all {} local "
+        "searches. Each p's LON has {} sinks, one per run, and {} funnels, {} of them global",
+        lambda: (
+            (t := gym_trials("pendulum-v1")).groupby("p")["run"].nunique().iloc[0],
+            t.groupby(["p", "run"]).size().max(),
+            len(t),
+            int((t["p"] == 0.001).sum()),
+            int((t["p"] == 0.0001).sum()),
+            t["env_steps"].sum() / 1e6,
+            gym_sampling_minutes("pendulum-v1"),
+            (best := t.groupby(["p", "run"])["fitness"].max()).min(),
+            best.max(),
+            (best.max() - 1.0) * 3254.72,
+            int((t["fitness"] >= 0.9).sum()),
+            len(t),
+            int((t.groupby(["p", "run"]).size() == 10).sum()),
+            best.size,
+            10,
+            *{int(v) for v in gym_metrics("pendulum-v1")["sinks"]},
+            *{int(v) for v in gym_metrics("pendulum-v1")["funnels"]},
+            *{int(v) for v in gym_metrics("pendulum-v1")["global_funnels"]},
         ),
     ),
     # docs/study-two-cart.md
