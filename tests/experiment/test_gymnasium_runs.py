@@ -157,3 +157,32 @@ def test_a_gymnasium_task_gives_the_same_trials_on_dask(tmp_path):
     )
     columns = ["p", "run", "index", "parent", "fitness", "accepted", "start_fitness"]
     assert serial[columns].equals(other[columns])
+
+
+@pytest.mark.parametrize("name", ["pendulum-v1", "mountaincar-continuous"])
+def test_the_committed_worked_example_replays_through_the_public_path(name):
+    """A sample of the committed optima: each stored Actor's greedy episode gives its stored
+    fitness, bit for bit where the manifest's CPU dispatch and environment match this
+    machine's (else within verify's tolerance)."""
+    from pathlib import Path
+
+    from lonlib.analysis.pipeline import load_experiment
+    from lonlib.analysis.verify import TASK_REPLAY_TOLERANCE, task_replays_exactly
+    from lonlib.storage.layout import optimum_path
+    from lonlib.storage.trials import read_optimum
+    from lonlib.task import task_of
+
+    folder = Path(__file__).parents[2] / "data" / "gymnasium" / name
+    if not (folder / "manifest.json").exists():
+        pytest.skip(f"{folder} is not committed yet")
+    config, trials = load_experiment(folder)
+    task = task_of(config)
+    exact = task_replays_exactly(folder, config)
+    sample = trials.sort_values("fitness").iloc[:: max(1, len(trials) // 6)]
+    for row in sample.itertuples():
+        theta = read_optimum(optimum_path(folder, row.p, row.run, row.index)).theta
+        replayed = float(task.fitness(theta[None])[0])
+        if exact:
+            assert replayed == row.fitness
+        else:
+            assert abs(replayed - row.fitness) <= TASK_REPLAY_TOLERANCE
