@@ -352,6 +352,7 @@ def _record(args: argparse.Namespace) -> None:
 
 def _verify(args: argparse.Namespace) -> None:
     from lonlib.analysis.verify import verify_experiment
+    from lonlib.storage.layout import read_manifest
 
     root = experiment_folder(args.dir)
     if args.dry_run:
@@ -370,7 +371,13 @@ def _verify(args: argparse.Namespace) -> None:
         from lonlib.analysis.verify import blocks_sealing
 
         failed = blocks_sealing(report)
-    if args.gymnasium:
+    if args.gymnasium and (read_manifest(root).get("config") or {}).get("task") is not None:
+        print(
+            "info: [gymnasium] --gymnasium replays the coupled pendulums' registered "
+            "environment only; a Gymnasium task's replay above already goes through "
+            "gymnasium.make (plain verify): nothing more to replay"
+        )
+    elif args.gymnasium:
         from lonlib.storage.policies import gymnasium_mismatches
 
         replayed, mismatches = gymnasium_mismatches(root)

@@ -186,3 +186,18 @@ def test_the_committed_worked_example_replays_through_the_public_path(name):
             assert replayed == row.fitness
         else:
             assert abs(replayed - row.fitness) <= TASK_REPLAY_TOLERANCE
+
+
+def test_verify_gymnasium_on_a_gymnasium_task_says_it_applies_to_the_pendulums_only(
+    tmp_path, capsys
+):
+    """``--gymnasium`` replays the pendulums' registered env; on a Gymnasium task (whose
+    plain verify already replays through gymnasium.make) it says so and keeps the result."""
+    from lonlib.cli import main as cli_main
+
+    out = tmp_path / "line"
+    run_experiment(line_config(), out, progress=False)
+    cli_main(["verify", "--gymnasium", "--no-recordings", str(out)])
+    printed = capsys.readouterr().out
+    assert "verify: OK" in printed
+    assert "info: [gymnasium]" in printed and "plain verify" in printed
