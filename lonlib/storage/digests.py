@@ -622,7 +622,7 @@ def check_experiment_seal(
     root = Path(root)
     check = SealCheck(root, is_sealed(root))
     if not check.sealed:
-        _check_lost_seal(check, root, manifest)
+        _check_lost_seal(check, root, manifest, files)
         return check
     try:
         seal = _read(root / SEAL_NAME)
@@ -648,15 +648,34 @@ def check_experiment_seal(
     return check
 
 
-def _check_lost_seal(check: SealCheck, root: Path, manifest: Mapping[str, Any]) -> None:
+def _check_lost_seal(
+    check: SealCheck, root: Path, manifest: Mapping[str, Any], files: bool = True
+) -> None:
     """A folder without its root seal: tampered if its runs hold digests or its manifest
-    records that it was sealed (a lost seal is not an old experiment), else unsealed."""
+    records that it was sealed (a lost seal is not an old experiment), else unsealed. The
+    runs that hold digests are checked against them (their tables and, with ``files``,
+    files): when every one matches, the lost root reads as an interrupted ``verify --seal``
+    (which sealing again completes), else each difference is named."""
     chained = sorted(root.glob(f"p=*/run_*/{RUN_DIGESTS}"))
     if chained:  # written with digests: a lost root is not an old experiment
         check.sealed = True
-        check.problems.append(
-            (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
-        )
+        # every run that holds digests must match them exactly: only then is the lost root
+        # an interrupted `verify --seal` (it seals each run from its table, then the root)
+        for folder in (p.parent for p in chained):
+            key = _run_key(folder, root)
+            _check_run(check, _SealedRun(key, folder, None, None, rootless=True), files)
+        if check.problems:
+            check.problems.append(
+                (
+                    SEAL_NAME,
+                    "missing, and the runs' digests do not match their tables and files "
+                    "(named): not an interrupted seal",
+                )
+            )
+        else:
+            check.problems.append(
+                (SEAL_NAME, f"missing, while {len(chained)} run(s) hold their digests")
+            )
     elif manifest.get(SEALED_FIELD) is True:
         check.sealed = True
         check.problems.append(
@@ -678,6 +697,9 @@ class _SealedRun:
     folder: Path
     sealed: Mapping[str, Any] | None
     chains: str | None
+    rootless: bool = False
+    """The root seal is missing: the run's digests must seal its table exactly (what
+    ``verify --seal`` writes before the root), nothing sealed ahead nor pending."""
 
 
 def _check_run(check: SealCheck, run: _SealedRun, files: bool) -> None:
@@ -761,6 +783,14 @@ def _check_rows(
         check.problems.append(
             (f"{key}/trials.parquet", f"holds {len(rows)} trials, the seal holds {count}")
         )
+    elif run.rootless and len(rows) < len(entries):
+        check.problems.append(
+            (
+                f"{key}/trials.parquet",
+                f"holds {len(rows)} trials, its run's digests seal {len(entries)} (and the "
+                "root seal is missing): trials were removed",
+            )
+        )
     elif len(rows) < len(entries):
         check.pending.append(
             (
@@ -782,7 +812,7 @@ def _check_rows(
                 "(rows added after the seal)",
             )
         )
-    if len(entries) > count:
+    if len(entries) > count and not run.rootless:
         check.pending.append(
             (
                 f"{key}/{RUN_DIGESTS}",

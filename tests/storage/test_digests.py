@@ -677,3 +677,47 @@ def test_a_reader_that_refuses_names_its_command(small, copy, verb, capsys):
             cli_main(argv)
         err = capsys.readouterr().err
         assert "run_0000/trials.parquet" in err and f"`lonlib {verb}` stops" in err, argv
+
+
+def drop_last_trial(folder: Path, run: int, keep_digests: bool = True) -> None:
+    """A run's last row and its files removed (its digests entry kept, unless not
+    ``keep_digests``)."""
+    rewrite_table(folder, run, lambda t: t.iloc[:-1])
+    for path in run_dir(folder, P, run).glob(f"*_{SEARCHES - 1:04d}.*"):
+        path.unlink()
+    if not keep_digests:
+        path = run_dir(folder, P, run) / RUN_DIGESTS
+        digests = json.loads(path.read_text())
+        digests["trials"] = digests["trials"][:-1]
+        path.write_text(json.dumps(digests))
+
+
+@pytest.mark.parametrize("change", ["critic", "last trial", "both"])
+def test_a_change_under_a_deleted_root_seal_is_named_and_not_sealed(small, copy, change, capsys):
+    """Deleting only seal.json does not make --seal accept what the runs' digests refuse."""
+    if change in ("critic", "both"):
+        rewrite_optimum(copy, 1, 1, plus("omega", 1e-3))
+    if change in ("last trial", "both"):
+        drop_last_trial(copy, 0)
+    (copy / SEAL_NAME).unlink()
+    errors = findings(copy)
+    if change in ("critic", "both"):
+        assert any("run_0001/optimum_0001.npz: differs from its seal" in e for e in errors)
+    if change in ("last trial", "both"):
+        assert any("run_0000/trials.parquet: holds 2 trials" in e for e in errors), errors
+    assert not any("seal.json: missing, while" in e for e in errors), errors
+    with pytest.raises(SystemExit):
+        cli_main(["verify", "--seal", str(copy)])
+    assert not (copy / SEAL_NAME).exists()
+    with pytest.raises(TamperedDataError):
+        load_experiment(copy)
+
+
+def test_a_seal_interrupted_before_its_root_is_completed_by_sealing_again(small, copy, capsys):
+    (copy / SEAL_NAME).unlink()  # runs sealed, the root not yet, nothing changed
+    assert findings(copy) == [
+        "error: [digest] seal.json: missing, while 2 run(s) hold their digests"
+    ]
+    cli_main(["verify", "--seal", str(copy)])
+    assert "sealed:" in capsys.readouterr().out
+    assert verify_experiment(copy, recordings=False).findings == []
