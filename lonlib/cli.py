@@ -400,12 +400,11 @@ def _verify(args: argparse.Namespace) -> None:
 
 def _verify_files(root: Path, seal: bool) -> None:
     """``lonlib verify`` of a folder that is not an experiment (a study's summaries): its
-    files against its ``files`` seal, or (``--seal``) sealed as they are."""
+    files against its ``files`` seal, then (``--seal``) sealed as they are, never silently:
+    a folder whose files differ from their seal is refused (to accept a deliberate change,
+    delete its ``seal.json`` first); files written since the seal (pending) are sealed."""
     from lonlib.storage.digests import check_files_seal, seal_files
 
-    if seal:
-        print(f"sealed {seal_files(root)} files: {root / 'seal.json'}")
-        return
     check = check_files_seal(root)
     for name, what in check.problems:
         print(f"error: [digest] {name}: {what}")
@@ -413,7 +412,14 @@ def _verify_files(root: Path, seal: bool) -> None:
         print(f"warning: [digest] {name}: {what}")
     print("verify: OK" if check.ok else f"verify: FAILED ({len(check.problems)} errors)")
     if not check.ok:
+        if seal:
+            print(
+                f"not sealed: files differ from their seal; to accept a deliberate change, "
+                f"delete {root / 'seal.json'}, then `lonlib verify {root} --seal`"
+            )
         raise SystemExit(1)
+    if seal:
+        print(f"sealed {seal_files(root)} files: {root / 'seal.json'}")
 
 
 def _thin(args: argparse.Namespace) -> None:

@@ -721,3 +721,22 @@ def test_a_seal_interrupted_before_its_root_is_completed_by_sealing_again(small,
     cli_main(["verify", "--seal", str(copy)])
     assert "sealed:" in capsys.readouterr().out
     assert verify_experiment(copy, recordings=False).findings == []
+
+
+def test_sealing_a_study_folder_whose_files_differ_is_refused(tmp_path, capsys):
+    """``--seal`` verifies first: an edited file is not sealed over (never silently); a
+    deliberate change is accepted by deleting seal.json, then sealing."""
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "calibration.csv").write_text("x\n1\n")
+    seal_files(folder)
+    sealed = (folder / SEAL_NAME).read_text()
+    (folder / "calibration.csv").write_text("x\n2\n")
+    with pytest.raises(SystemExit):
+        cli_main(["verify", "--seal", str(folder)])
+    assert "calibration.csv: differs from its seal" in capsys.readouterr().out
+    assert (folder / SEAL_NAME).read_text() == sealed
+    (folder / SEAL_NAME).unlink()
+    cli_main(["verify", "--seal", str(folder)])
+    cli_main(["verify", str(folder)])
+    assert "verify: OK" in capsys.readouterr().out
