@@ -154,6 +154,25 @@ MUTANTS = [
     ),
     Mutant(
         DIGESTS,
+        "if len(rows) < count:",
+        "if False:",
+        "a run's last rows and files removed under kept digests read as sealed ahead (resume "
+        "re-samples them)",
+    ),
+    Mutant(
+        DIGESTS,
+        'check.problems.append((f"{run.key}/{name}", "a sealed file is missing"))',
+        "pass",
+        "a deleted history or optimum is not named (histories are not replayed)",
+    ),
+    Mutant(
+        DIGESTS,
+        'check.problems.append((f"{run.key}/{path.name}", "a file no seal lists"))',
+        "pass",
+        "an extra file no seal lists in a run's folder is not named",
+    ),
+    Mutant(
+        DIGESTS,
         "elif file_digest(path) not in accepted:",
         "elif False:",
         "a changed optimum or history passes",

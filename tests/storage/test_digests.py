@@ -740,3 +740,30 @@ def test_sealing_a_study_folder_whose_files_differ_is_refused(tmp_path, capsys):
     cli_main(["verify", "--seal", str(folder)])
     cli_main(["verify", str(folder)])
     assert "verify: OK" in capsys.readouterr().out
+
+
+def test_removed_last_rows_and_files_under_kept_digests_are_named_and_refused(small, copy):
+    """A run's last row and files removed, its digests.json kept: named against the root's
+    count (not read as a trial sealed ahead), and resuming refuses rather than re-sampling."""
+    drop_last_trial(copy, 0)
+    errors = findings(copy)
+    assert any("run_0000/trials.parquet: holds 2 trials, the seal holds 3" in e for e in errors)
+    assert_caught(copy, "run_0000/trials.parquet", small[0])
+    assert len(pd.read_parquet(trials_path(copy, P, 0))) == SEARCHES - 1  # nothing re-sampled
+
+
+@pytest.mark.parametrize("name", ["history_0001.parquet", "optimum_0001.npz"])
+def test_a_deleted_sealed_file_is_named(small, copy, name):
+    """Histories are not replayed: only the digest names a deleted one."""
+    (run_dir(copy, P, 1) / name).unlink()
+    errors = findings(copy)
+    assert f"error: [digest] p=0.001/run_0001/{name}: a sealed file is missing" in errors, errors
+    assert_caught(copy, f"run_0001/{name}", small[0])
+
+
+def test_an_extra_file_no_seal_lists_is_named(small, copy):
+    folder = run_dir(copy, P, 0)
+    shutil.copy(folder / "optimum_0001.npz", folder / "optimum_00001.npz")
+    errors = findings(copy)
+    assert "error: [digest] p=0.001/run_0000/optimum_00001.npz: a file no seal lists" in errors
+    assert_caught(copy, "run_0000/optimum_00001.npz", small[0])
