@@ -371,6 +371,11 @@ def _verify(args: argparse.Namespace) -> None:
         from lonlib.analysis.verify import blocks_sealing
 
         failed = blocks_sealing(report)
+        if failed and report.ok:
+            print(
+                "not sealed: stored numbers do not replay (reported as warnings: another "
+                "result-path version); only a folder whose numbers replay is sealed"
+            )
     if args.gymnasium and (read_manifest(root).get("config") or {}).get("task") is not None:
         print(
             "info: [gymnasium] --gymnasium replays the coupled pendulums' registered "

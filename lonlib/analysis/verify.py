@@ -397,7 +397,10 @@ def seal_experiment(report: VerifyReport) -> None:
     # A seal interrupted part-way (runs sealed, the root not yet) is this command's own
     # state: sealing again completes it. Every other finding stops it.
     if blocks_sealing(report):
-        raise ValueError(f"{report.folder}: verify failed; only a folder that verifies is sealed")
+        raise ValueError(
+            f"{report.folder}: verify failed or a stored number does not replay; only a folder "
+            "that verifies and replays is sealed"
+        )
     if not report.recordings_checked:
         raise ValueError("--seal seals the recordings too: run it without --no-recordings")
     folder = report.folder
@@ -420,11 +423,20 @@ def seal_experiment(report: VerifyReport) -> None:
         sampling.release()
 
 
+REPLAY_CHECKS = ("fitness", "descriptor", "label", "consistency", "start", "recording")
+"""The checks whose finding says a stored number does not replay: a warning of one of them
+(data of another result-path version) still stops ``verify --seal``."""
+
+
 def blocks_sealing(report: VerifyReport) -> bool:
     """Whether ``report`` has an error other than a missing root seal (this command's own
     interrupted seal, runs sealed and the root not yet, or a seal removed with the runs'
-    digests to accept a deliberate change), which sealing after a full replay completes."""
-    return any(not _interrupted_seal(finding) for finding in report.errors)
+    digests to accept a deliberate change), which sealing after a full replay completes,
+    or any replay mismatch, even one reported as a warning (data of another result-path
+    version): a folder is sealed only when every stored number replays."""
+    return any(not _interrupted_seal(finding) for finding in report.errors) or any(
+        finding.check in REPLAY_CHECKS for finding in report.warnings
+    )
 
 
 def _interrupted_seal(finding: Finding) -> bool:

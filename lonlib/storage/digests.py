@@ -8,7 +8,8 @@ in ``git status`` and in the history.
 
 Layout (beside :mod:`lonlib.storage.layout`)::
 
-    data/<experiment>/seal.json              the root: the configuration's digest, each run's
+    data/<experiment>/seal.json              the root: the configuration's digest, the
+                                             sessions' result-path versions, each run's
                                              trial count and chain head, the recordings
                                              index, the figures and the inputs they were
                                              drawn from, the chains' configuration
@@ -257,6 +258,9 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
         isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
     ):
         return "'recordings' is not a mapping of recordings to their trial and digest"
+    for name in ("result_path_versions", "result_path_versions_next"):
+        if name in payload and not isinstance(payload[name], list):
+            return f"'{name}' is not a list"
     if "chain_config" in payload and not _is_digest(payload["chain_config"]):
         return "'chain_config' is not a digest"
     figures = payload.get("figures", {})
@@ -276,6 +280,15 @@ def is_sealed(root: Path) -> bool:
 def config_digest(manifest: Mapping[str, Any]) -> str:
     """The digest of a manifest's configuration (its sessions may grow; its settings not)."""
     return bytes_digest(json.dumps(manifest["config"], sort_keys=True).encode())
+
+
+def result_path_versions(manifest: Mapping[str, Any]) -> list[Any]:
+    """The result-path version each session of a manifest recorded (None: unrecorded): they
+    decide whether a replay mismatch is an error or a warning, so the root seals them."""
+    sessions = manifest.get("sessions", [])
+    if not isinstance(sessions, list):
+        return []
+    return [s.get("result_path_version") if isinstance(s, dict) else None for s in sessions]
 
 
 # ----------------------------------------------------------------------------- writers
@@ -421,6 +434,11 @@ def write_root(
         seal["chain_config"] = chains
     if next_manifest is not None and config_digest(next_manifest) != seal["config"]:
         seal["config_next"] = config_digest(next_manifest)
+    seal["result_path_versions"] = result_path_versions(manifest)
+    if next_manifest is not None and result_path_versions(next_manifest) != result_path_versions(
+        manifest
+    ):
+        seal["result_path_versions_next"] = result_path_versions(next_manifest)
     if recordings is not None:
         folder = root / RECORDINGS_FOLDER
         seal["recordings"] = {
@@ -634,6 +652,17 @@ def check_experiment_seal(
         return check
     if config_digest(manifest) not in (seal.get("config"), seal.get("config_next")):
         check.problems.append(("manifest.json", "its configuration differs from the sealed one"))
+    if "result_path_versions" in seal and result_path_versions(manifest) not in (
+        seal["result_path_versions"],
+        seal.get("result_path_versions_next"),
+    ):  # a root sealed before they were sealed says nothing about them
+        check.problems.append(
+            (
+                "manifest.json",
+                "its sessions' result-path versions differ from the sealed ones (they decide "
+                "whether a replay mismatch is an error)",
+            )
+        )
     sealed_runs = seal.get("runs", {})
     folders = {_run_key(f, root): f for f in _run_folders(root)}
     for key in sorted(set(sealed_runs) - set(folders)):

@@ -138,6 +138,8 @@ def test_an_experiment_of_another_result_path_is_not_extended(damaged):
     data = json.loads(manifest.read_text())
     data["sessions"][0]["result_path_version"] = None
     manifest.write_text(json.dumps(data))
+    reseal(folder)  # a folder written so (the root seals the sessions' versions)
+    data = json.loads(manifest.read_text())
     from lonlib.config import ExperimentConfig
 
     config = ExperimentConfig.from_mapping(read_manifest(folder)["config"])
@@ -161,6 +163,7 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
         }
     )
     manifest.write_text(json.dumps(data))
+    reseal(folder)  # a folder written so (the root seals the sessions' versions)
     report = verify_experiment(folder, recordings=False)
     assert report.ok
     messages = [f.message for f in report.warnings if f.check == "provenance"]
@@ -171,6 +174,7 @@ def test_sessions_of_other_environments_or_kernels_are_warned_about(damaged):
     data["sessions"][-1] = {**first, "versions": {**data["versions"], "numpy": "0.0"}}
     data["sessions"][-1]["environment"] = {"installed_sha256": "x"}
     manifest.write_text(json.dumps(data))
+    reseal(folder)
     (environment,) = [
         f.message
         for f in verify_experiment(folder, recordings=False).warnings

@@ -767,3 +767,41 @@ def test_an_extra_file_no_seal_lists_is_named(small, copy):
     errors = findings(copy)
     assert "error: [digest] p=0.001/run_0000/optimum_00001.npz: a file no seal lists" in errors
     assert_caught(copy, "run_0000/optimum_00001.npz", small[0])
+
+
+def set_versions(folder: Path, version: str) -> None:
+    manifest = json.loads((folder / "manifest.json").read_text())
+    for session in manifest["sessions"]:
+        session["result_path_version"] = version
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
+def test_the_sessions_result_path_versions_are_sealed(small, copy):
+    """They decide whether a replay mismatch is an error: an older one stamped by hand on
+    a sealed folder (turning errors into warnings) is named."""
+    assert json.loads((copy / SEAL_NAME).read_text())["result_path_versions"] == ["2"]
+    set_versions(copy, "1")
+    assert any("manifest.json: its sessions' result-path versions" in e for e in findings(copy))
+    with pytest.raises(TamperedDataError, match="manifest.json"):
+        load_experiment(copy)
+
+
+def test_a_root_sealed_before_the_versions_were_sealed_reads_as_before(small, copy):
+    seal = json.loads((copy / SEAL_NAME).read_text())
+    del seal["result_path_versions"]
+    (copy / SEAL_NAME).write_text(json.dumps(seal))
+    assert check_experiment_seal(copy, read_manifest(copy)).ok
+
+
+def test_sealing_refuses_mismatches_reported_as_warnings(small, copy, capsys):
+    """An unsealed folder stamped with an older version: its mismatches are warnings, and
+    ``--seal`` still refuses to seal numbers that do not replay."""
+    unseal(copy)
+    set_versions(copy, "1")
+    rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
+    report = verify_experiment(copy, recordings=False)
+    assert report.ok and any(f.check == "fitness" for f in report.warnings)
+    with pytest.raises(SystemExit):
+        cli_main(["verify", "--seal", str(copy)])
+    assert "not sealed: stored numbers do not replay" in capsys.readouterr().out
+    assert not (copy / SEAL_NAME).exists()
