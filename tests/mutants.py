@@ -246,14 +246,19 @@ MUTANTS = [
     Mutant(
         DIGESTS,
         "        elif file_digest(path) != digest:\n"
-        '            check.problems.append((name, "differs from its seal"))',
+        "            check.problems.append(\n"
+        '                (name, "differs from its seal (a figure: `lonlib analyse` '
+        'regenerates it)")\n'
+        "            )",
         "        elif False:\n            pass",
         "a changed figure passes",
     ),
     Mutant(
         DIGESTS,
-        '        if not path.is_file():\n            check.problems.append((name, "a sealed figure',
-        '        if False:\n            check.problems.append((name, "a sealed figure',
+        "        if not path.is_file():\n            check.problems.append(\n"
+        '                (name, "a sealed figure',
+        "        if False:\n            check.problems.append(\n"
+        '                (name, "a sealed figure',
         "a missing figure passes",
     ),
     Mutant(

@@ -908,7 +908,12 @@ def _check_recordings(
         check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "not in the recordings index"))
     for name in sorted(present & set(listed)):
         if file_digest(folder / name) != listed[name].get("sha256"):
-            check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "differs from its seal"))
+            check.problems.append(
+                (
+                    f"{RECORDINGS_FOLDER}/{name}",
+                    "differs from its seal (a recording: `lonlib record` regenerates it)",
+                )
+            )
 
 
 def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> None:
@@ -919,9 +924,13 @@ def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> Non
     for name, digest in sorted(listed.items()):
         path = root / name
         if not path.is_file():
-            check.problems.append((name, "a sealed figure or table is missing"))
+            check.problems.append(
+                (name, "a sealed figure or table is missing (`lonlib analyse` regenerates it)")
+            )
         elif file_digest(path) != digest:
-            check.problems.append((name, "differs from its seal"))
+            check.problems.append(
+                (name, "differs from its seal (a figure: `lonlib analyse` regenerates it)")
+            )
     for path in figure_files(root):
         name = path.relative_to(root).as_posix()
         if name not in listed:

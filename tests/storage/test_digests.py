@@ -347,7 +347,10 @@ def test_a_changed_recording_is_named(tmp_path):
     with open(recording, "ab") as handle:
         handle.write(b"\0")
     problems = dict(check_experiment_seal(copy, read_manifest(copy)).problems)
-    assert problems == {f"recordings/{recording.name}": "differs from its seal"}
+    assert problems == {
+        f"recordings/{recording.name}": "differs from its seal (a recording: `lonlib record` "
+        "regenerates it)"
+    }
 
 
 def test_a_study_folder_is_sealed_file_by_file(tmp_path, capsys):
@@ -568,8 +571,9 @@ def test_an_edited_or_missing_figure_is_named(analysed):
     (analysed / "figures" / "fig2_optima_boxplot.png").unlink()
     problems = dict(check_experiment_seal(analysed, read_manifest(analysed)).problems)
     assert problems == {
-        "figures/metrics.csv": "differs from its seal",
-        "figures/fig2_optima_boxplot.png": "a sealed figure or table is missing",
+        "figures/metrics.csv": "differs from its seal (a figure: `lonlib analyse` regenerates it)",
+        "figures/fig2_optima_boxplot.png": "a sealed figure or table is missing (`lonlib analyse` "
+        "regenerates it)",
     }
 
 
@@ -805,3 +809,21 @@ def test_sealing_refuses_mismatches_reported_as_warnings(small, copy, capsys):
         cli_main(["verify", "--seal", str(copy)])
     assert "not sealed: stored numbers do not replay" in capsys.readouterr().out
     assert not (copy / SEAL_NAME).exists()
+
+
+def test_a_record_killed_before_its_reseal_is_repaired_by_recording_again(small, copy):
+    """``record`` rewrote a recording, then was killed before resealing it: verify says
+    `lonlib record` regenerates it, and recording again does (its own output); a recording
+    it would not write stays a refusal."""
+    from lonlib.analysis.pipeline import record_optima
+
+    (path,) = record_optima(copy, limit=1)
+    with open(path, "ab") as handle:
+        handle.write(b"\0")  # as a rewrite the reseal did not follow
+    problems = dict(check_experiment_seal(copy, read_manifest(copy)).problems)
+    assert "`lonlib record` regenerates it" in problems[f"recordings/{path.name}"]
+    assert record_optima(copy, limit=1) == [path]
+    assert check_experiment_seal(copy, read_manifest(copy)).ok
+    shutil.copy(path, path.with_name("planted.rrd"))
+    with pytest.raises(TamperedDataError, match="planted.rrd"):
+        record_optima(copy, limit=1)
