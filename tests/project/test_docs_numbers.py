@@ -1159,6 +1159,31 @@ NUMBERS = [
             *{int(v) for v in gym_metrics("pendulum-v1")["global_funnels"]},
         ),
     ),
+    Number(
+        "docs/your-task.md",
+        "2 × {} runs, {} local searches ({} per p), {:.2f}M env steps. **The deceptive optimum "
+        "takes every run:** no optimum reaches the goal (the best scores {:.5f}, a return of "
+        "almost exactly {:.0f}: the car stays put and spends almost no fuel; reaching the goal would score "
+        "above 0.9), {} of the {} runs end at 0.4997 or above, and {} of the {} optima score "
+        "below 0.49 (fuel spent without reaching the goal, down to {:.4f}). Each p's LON has {} "
+        "sinks and {} funnels, {} of them global",
+        lambda: (
+            (t := gym_trials("mountaincar-continuous")).groupby("p")["run"].nunique().iloc[0],
+            len(t),
+            *{int(n) for n in t.groupby("p").size()},
+            t["env_steps"].sum() / 1e6,
+            t["fitness"].max(),
+            abs(t["fitness"].max() * 199.9 - 99.9),
+            int(((best := t.groupby(["p", "run"])["fitness"].max()) >= 0.4997).sum()),
+            best.size,
+            int((t["fitness"] < 0.49).sum()),
+            len(t),
+            t["fitness"].min(),
+            *{int(v) for v in gym_metrics("mountaincar-continuous")["sinks"]},
+            *{int(v) for v in gym_metrics("mountaincar-continuous")["funnels"]},
+            *{int(v) for v in gym_metrics("mountaincar-continuous")["global_funnels"]},
+        ),
+    ),
     # docs/study-two-cart.md
     Number(
         "docs/study-two-cart.md",
