@@ -20,7 +20,10 @@ LOCK_FILES := $(foreach lock,all base dev docs lab bench,$(REQ)/$(lock).txt)
 # Where uv finds torch's CPU wheel when resolving its dependencies (pip's find-links here).
 TORCH_FIND_LINKS ?= $(or $(PIP_FIND_LINKS),https://download.pytorch.org/whl/cpu/torch/)
 LOCK_UPGRADE ?= --upgrade
-TEST_JOBS ?= 2
+# 4 test processes on 2 cores: many tests wait on worker processes, notebook kernels and Dask
+# clusters, so 4 keep both cores busy (measured: 335 s with 4, 491 s with 2 on this 2-core
+# machine, the same 1604 tests passing).
+TEST_JOBS ?= 4
 LATEST ?= .venv-latest
 
 CONFIG    ?= quick
