@@ -31,7 +31,7 @@ import torch
 from lonlib.config import DDPGConfig
 from lonlib.ddpg.learner import make_learner
 from lonlib.ddpg.replay import ReplayBuffer
-from lonlib.ddpg.slots import EpisodeRecord, LocalSearchResult, is_improvement
+from lonlib.ddpg.slots import EpisodeRecord, LocalSearchResult, is_improvement, starting_result
 from lonlib.task.gymnasium_task import GymnasiumTask
 
 
@@ -60,15 +60,7 @@ def gymnasium_local_search(
         return episode.fitness, episode.episode_return
 
     start_score = greedy(theta)
-    result = LocalSearchResult(
-        fitness=start_score[0] if hp.count_start else -np.inf,
-        theta=theta.copy(),
-        omega=omega.copy(),
-        start_fitness=start_score[0],
-        env_steps=0,
-        seconds=0.0,
-        stop_reason="budget",
-    )
+    result = starting_result(theta, omega, start_score[0], hp.count_start)
     best = start_score if hp.count_start else (-np.inf, -np.inf)
     last_improvement = hp.warmup_steps  # the patience window opens with the first update
     episode, episode_return, episode_length, updates = 0, 0.0, 0, 0

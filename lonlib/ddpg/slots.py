@@ -48,6 +48,22 @@ class LocalSearchResult:
         return self.fitness > self.start_fitness
 
 
+def starting_result(
+    theta: np.ndarray, omega: np.ndarray, start_fitness: float, count_start: bool
+) -> LocalSearchResult:
+    """What a one-agent local search holds before it judges a trained policy: its start's
+    parameters and greedy fitness, the start a candidate only with ``count_start``."""
+    return LocalSearchResult(
+        fitness=start_fitness if count_start else -np.inf,
+        theta=theta.copy(),
+        omega=omega.copy(),
+        start_fitness=start_fitness,
+        env_steps=0,
+        seconds=0.0,
+        stop_reason="budget",
+    )
+
+
 def is_improvement(
     candidate: tuple[float, float], incumbent: tuple[float, float], plateau_tiebreak: bool
 ) -> bool:

@@ -28,7 +28,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from lonlib.config import DDPGConfig
-from lonlib.ddpg.slots import EpisodeRecord, LocalSearchResult, is_improvement
+from lonlib.ddpg.slots import EpisodeRecord, LocalSearchResult, is_improvement, starting_result
 from lonlib.sb3.env import TrainingEnv
 from lonlib.sb3.params import actor_theta, critic_omega
 from lonlib.task.gymnasium_task import GymnasiumTask
@@ -56,15 +56,7 @@ class JudgingCallback(BaseCallback):
         self.started = started  # time.perf_counter() at the search's start
         start = self.greedy(theta)
         self.best = start if hp.count_start else (-np.inf, -np.inf)
-        self.search = LocalSearchResult(
-            fitness=start[0] if hp.count_start else -np.inf,
-            theta=theta.copy(),
-            omega=omega.copy(),
-            start_fitness=start[0],
-            env_steps=0,
-            seconds=0.0,
-            stop_reason="budget",
-        )
+        self.search = starting_result(theta, omega, start[0], hp.count_start)
         self.last_improvement = hp.warmup_steps  # the patience window opens with the warm-up
         self.ended: tuple[int, float, int] | None = None  # (step, return, length) to close
         self.losses: list[tuple[float, float]] = []

@@ -1163,10 +1163,10 @@ NUMBERS = [
         "docs/your-task.md",
         "2 × {} runs, {} local searches ({} per p), {:.2f}M env steps. **The deceptive optimum "
         "takes every run:** no optimum reaches the goal (the best scores {:.5f}, a return of "
-        "almost exactly {:.0f}: the car stays put and spends almost no fuel; reaching the goal would score "
-        "above 0.9), {} of the {} runs end at 0.4997 or above, and {} of the {} optima score "
-        "below 0.49 (fuel spent without reaching the goal, down to {:.4f}). Each p's LON has {} "
-        "sinks and {} funnels, {} of them global",
+        "almost exactly {:.0f}: the car stays put and spends almost no fuel; reaching the goal "
+        "would score above 0.9), {} of the {} runs end at 0.4997 or above, and {} of the {} "
+        "optima score below 0.49 (fuel spent without reaching the goal, down to {:.4f}). Each "
+        "p's LON has {} sinks and {} funnels, {} of them global",
         lambda: (
             (t := gym_trials("mountaincar-continuous")).groupby("p")["run"].nunique().iloc[0],
             len(t),
