@@ -1130,9 +1130,13 @@ def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
 
 def copy_committed_data(workdir: Path) -> None:
     """git's files under ``data/`` (the committed experiments and studies, which guard tests
-    read) into ``workdir``, so that a mutant never reads or writes the working tree's."""
+    read) and ``benchmarks/measured/`` (the measured costs the claims' power table reads) into
+    ``workdir``, so that a mutant never reads or writes the working tree's."""
     listed = subprocess.run(
-        ["git", "ls-files", "-z", "data"], cwd=ROOT, capture_output=True, check=True
+        ["git", "ls-files", "-z", "data", "benchmarks/measured"],
+        cwd=ROOT,
+        capture_output=True,
+        check=True,
     ).stdout
     for name in filter(None, listed.split(b"\0")):
         target = workdir / os.fsdecode(name)
