@@ -1130,11 +1130,11 @@ def run_mutant(mutant: Mutant, workdir: Path, python: str) -> tuple[str, float]:
 
 def copy_committed_data(workdir: Path) -> None:
     """git's files under ``data/`` (the committed experiments and studies, which guard tests
-    read), ``benchmarks/measured/`` (the measured costs the claims' power table reads) and
-    ``configs/`` (the studies' grids) into ``workdir``, so that a mutant never reads or writes
-    the working tree's."""
+    read), ``benchmarks/measured/`` (the measured costs the claims' power table reads),
+    ``configs/`` (the studies' grids) and ``notebooks/`` (a calibration guard runs one) into
+    ``workdir``, so that a mutant never reads or writes the working tree's."""
     listed = subprocess.run(
-        ["git", "ls-files", "-z", "data", "benchmarks/measured", "configs"],
+        ["git", "ls-files", "-z", "data", "benchmarks/measured", "configs", "notebooks"],
         cwd=ROOT,
         capture_output=True,
         check=True,
