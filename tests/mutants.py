@@ -54,6 +54,7 @@ BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
+GYM_DDPG = "lonlib/ddpg/gymnasium_search.py"
 DIGESTS, TRIALS = "lonlib/storage/digests.py", "lonlib/storage/trials.py"
 SESSION = "lonlib/storage/session.py"
 JUDGED_LOG = "lonlib/calibration/judged_log.py"
@@ -134,6 +135,7 @@ GUARDS = {
     POWER: ["tests/analysis/test_claims_power.py"],
     KERNELS: ["tests/task/test_compiled_rollout.py"],
     DIGESTS: ["tests/storage/test_digests.py"],
+    GYM_DDPG: ["tests/ddpg/test_gymnasium_search.py"],
     TRIALS: ["tests/storage/test_digests.py"],
     SESSION: ["tests/storage/test_digests.py"],
 }
@@ -1091,6 +1093,18 @@ MUTANTS = [
         "upright_each[c] = cos > fc[F_COS_UPRIGHT]",
         "upright_each[c] = cos >= fc[F_COS_UPRIGHT]",
         "kernels: a rod exactly at the upright angle counted upright",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "            judged = (updates > 0 or hp.count_start) and (",
+        "            judged = True and (",
+        "Gymnasium DDPG: warm-up policies (the start) are judged as candidates",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "            critic_loss, actor_loss = learner.update(replay.sample(indices))",
+        "            critic_loss, actor_loss = np.zeros(1), np.zeros(1)",
+        "Gymnasium DDPG: no update is made",
     ),
 ]
 
