@@ -4,7 +4,7 @@ import os
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from benchmarks import ddpg, lockstep, lon, rollout, simulator  # noqa: E402
+from benchmarks import ddpg, gymnasium, lockstep, lon, rollout, simulator  # noqa: E402
 
 if __name__ == "__main__":
     lon.main()
@@ -12,3 +12,4 @@ if __name__ == "__main__":
     rollout.main()
     ddpg.main()
     lockstep.main()
+    gymnasium.main()

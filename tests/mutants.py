@@ -1096,15 +1096,45 @@ MUTANTS = [
     ),
     Mutant(
         GYM_DDPG,
-        "            judged = (updates > 0 or hp.count_start) and (",
-        "            judged = True and (",
+        "        judged = (search.updates > 0 or hp.count_start) and (",
+        "        judged = True and (",
         "Gymnasium DDPG: warm-up policies (the start) are judged as candidates",
     ),
     Mutant(
         GYM_DDPG,
-        "            critic_loss, actor_loss = learner.update(replay.sample(indices))",
-        "            critic_loss, actor_loss = np.zeros(1), np.zeros(1)",
+        "            critic_loss, actor_loss = self.learner.update(self.replay.sample(indices))",
+        "            critic_loss, actor_loss = np.zeros(self.slots), np.zeros(self.slots)",
         "Gymnasium DDPG: no update is made",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "                if search.updates == 0 and search.dirty:  # back to its start",
+        "                if False:",
+        "Gymnasium DDPG: a refilled slot trains from what the batch made of it in its warm-up",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "            rng = np.random.default_rng([seeds[j], SEARCH_STREAM])",
+        "            rng = np.random.default_rng([seeds[0], SEARCH_STREAM])",
+        "Gymnasium DDPG: the searches of a batch share one seed",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "int(sizes[slot]), size=hp.batch_size)",
+        "int(sizes[0]), size=hp.batch_size)",
+        "Gymnasium DDPG: a slot draws its replay indices by another slot's buffer size",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "                and search.steps - search.last_improvement >= hp.patience_steps",
+        "                and search.steps - search.last_improvement > hp.patience_steps",
+        "Gymnasium DDPG: patience runs one step longer",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "SlotEnvironmentError(str(error), search.tag if search else None)",
+        "SlotEnvironmentError(str(error), None)",
+        "Gymnasium DDPG: a failing environment is not traced to its search",
     ),
 ]
 

@@ -100,10 +100,10 @@ class ExperimentConfig:
                     "env: the coupled pendulums' physics does not apply to a Gymnasium task; "
                     "remove env (or task)"
                 )
-            if self.executor == "lockstep":
+            if self.executor == "lockstep" and self.task.search != "ddpg":
                 raise ValueError(
-                    "executor: lockstep batches the coupled pendulums only; a Gymnasium task "
-                    "runs with auto, serial, pool or dask"
+                    f"executor: lockstep batches lonlib's DDPG (task.search: ddpg); task.search "
+                    f"{self.task.search!r} runs with auto, serial, pool or dask"
                 )
 
     @property

@@ -57,7 +57,7 @@ import torch
 from lonlib.config import DDPGConfig, PendulumConfig, Scoring
 from lonlib.config.ddpg import check_batch_size, check_judging
 from lonlib.ddpg.devices import copy_to_device, to_device, to_host
-from lonlib.ddpg.learner import make_learner
+from lonlib.ddpg.learner import Learner, make_learner
 from lonlib.ddpg.replay import ReplayBuffer
 from lonlib.ddpg.slots import (
     JUDGE_BATCH,
@@ -78,6 +78,24 @@ from lonlib.task import compiled
 from lonlib.task.pendulum import CoupledPendulums
 from lonlib.task.policy import actor_spec, critic_spec
 from lonlib.task.rollout import Rollout, score_actors
+
+
+def check_refill(
+    learner: Learner,
+    hp: DDPGConfig,
+    busy: np.ndarray,
+    slots: Sequence[int],
+    seeds: Sequence[int],
+    tags: Sequence[Any],
+) -> None:
+    """Refuse a refill of a batch's ``slots`` (``busy``: which are taken) that its learner
+    cannot make, of taken or repeated slots, or without one seed and one tag per slot."""
+    if not learner.per_agent_state:
+        raise ValueError(f"the {hp.update!r} learner cannot refill slots; use 'lean'")
+    if any(busy[i] for i in slots) or len(set(slots)) != len(slots):
+        raise ValueError(f"slots {list(slots)} are not all free and distinct")
+    if not len(slots) == len(seeds) == len(tags):
+        raise ValueError("start needs one seed and one tag per slot")
 
 
 def check_parameters(name: str, values: np.ndarray, size: int, agents: int) -> np.ndarray:
@@ -269,12 +287,7 @@ class SlotTrainer:
     ) -> None:
         """Refill free ``slots`` with new searches (parameters, seeds, tags to report them
         by): parameters, targets, Adam state, replay buffer, streams and environment reset."""
-        if not self.learner.per_agent_state:
-            raise ValueError(f"the {self.hp.update!r} learner cannot refill slots; use 'lean'")
-        if any(self.busy[i] for i in slots) or len(set(slots)) != len(slots):
-            raise ValueError(f"slots {list(slots)} are not all free and distinct")
-        if not len(slots) == len(seeds) == len(tags):
-            raise ValueError("start needs one seed and one tag per slot")
+        check_refill(self.learner, self.hp, self.busy, slots, seeds, tags)
         thetas = check_parameters("theta", thetas, self.a_spec.n_params, len(slots))
         omegas = check_parameters("omega", omegas, self.c_spec.n_params, len(slots))
         for slot, theta, omega in zip(slots, thetas, omegas, strict=True):

@@ -37,7 +37,9 @@ import numpy as np
 
 from lonlib.config import DDPGConfig
 from lonlib.config.ddpg import check_batch_size
+from lonlib.ddpg.gymnasium_search import GymnasiumSlotTrainer, SlotEnvironmentError
 from lonlib.ddpg.search_interface import local_optimum
+from lonlib.ddpg.slots import LocalSearchResult
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.experiment.checkpoints import (
     check_settings,
@@ -46,8 +48,15 @@ from lonlib.experiment.checkpoints import (
     remove_leftovers,
     save_inflight,
 )
-from lonlib.experiment.runs import experiment_plan, open_run, run_lock_path, run_summary
-from lonlib.search.algorithm import BasinHoppingRun, SearchRequest
+from lonlib.experiment.runs import (
+    experiment_plan,
+    experiment_task,
+    open_run,
+    run_failure,
+    run_lock_path,
+    run_summary,
+)
+from lonlib.search.algorithm import BasinHoppingRun, LocalOptimum, SearchRequest
 from lonlib.storage.atomic import DataWriteError
 from lonlib.storage.inflight import (
     CheckpointUnreadable,
@@ -142,6 +151,8 @@ class LockstepBatch:
         check_lockstep(config.ddpg, slots)
         if checkpoint_seconds is not None:
             check_range("checkpoint_seconds", checkpoint_seconds, 0.0, 1e9)
+        if config.task is not None:  # a Gymnasium task's batch is not checkpointed
+            self.checkpoint_seconds = None
         self.out = Path(out)
         self.plan = experiment_plan(self.out, config)  # a checkpoint listing other runs is refused
         self.pending: deque[Job] = deque(jobs)
@@ -233,6 +244,35 @@ class LockstepBatch:
             [(r.p, r.run) for r in runs],
         )
 
+    def new_trainer(self, first: list[_Run]) -> SlotTrainer | GymnasiumSlotTrainer:
+        """A batch of the searches ``first`` asked for: the coupled pendulums' slot trainer, or
+        a Gymnasium task's (:class:`~lonlib.ddpg.gymnasium_search.GymnasiumSlotTrainer`)."""
+        thetas = np.stack([r.request.theta for r in first])
+        omegas = np.stack([r.request.omega for r in first])
+        seeds, tags = [r.request.seed for r in first], [(r.p, r.run) for r in first]
+        if self.config.task is not None:
+            task = experiment_task(self.config)
+            return GymnasiumSlotTrainer(task, thetas, omegas, seeds, self.config.ddpg, tags)
+        return SlotTrainer(thetas, omegas, seeds, self.config.env, self.config.ddpg, tags=tags)
+
+    def step(
+        self, trainer: SlotTrainer | GymnasiumSlotTrainer
+    ) -> list[tuple[Job, LocalSearchResult]]:
+        """One step of ``trainer``; a Gymnasium environment's failure names its run (what the
+        run stored before stays)."""
+        try:
+            return trainer.step()
+        except SlotEnvironmentError as error:
+            run = self.active[error.tag]
+            raise run_failure(run.p, run.run, len(run.driver.state.trials), error) from None
+
+    def optimum(self, result: LocalSearchResult) -> LocalOptimum:
+        """Algorithm 2's optimum of a finished search (a pendulum optimum with its behaviour
+        descriptor)."""
+        if self.config.task is not None:
+            return local_optimum(result, None, self.config.ddpg, describe_optima=False)
+        return local_optimum(result, self.config.env, self.config.ddpg)
+
     def may_fill(self) -> bool:
         """Whether the batch may start searches in its free slots now: before the drain
         time, or for its first fill when ``start_first`` (every call makes progress)."""
@@ -291,14 +331,7 @@ class LockstepBatch:
                 first.append(self.ask(run))
             if not first:
                 return
-            trainer = SlotTrainer(
-                np.stack([r.request.theta for r in first]),
-                np.stack([r.request.omega for r in first]),
-                [r.request.seed for r in first],
-                self.config.env,
-                self.config.ddpg,
-                tags=[(r.p, r.run) for r in first],
-            )
+            trainer = self.new_trainer(first)
             checkpoint, checkpoint_written = None, time.monotonic()
         self.start_first = False  # the first fill is over: the drain time holds from here
         last_tick, steps_at_tick = time.monotonic(), 0
@@ -308,7 +341,7 @@ class LockstepBatch:
         while trainer.busy.any():
             steps += int(trainer.busy.sum())
             refills: list[_Run] = []
-            ended = trainer.step()
+            ended = self.step(trainer)
             if not drained and draining(self.drain_at):
                 drained = True
                 log.info(
@@ -318,7 +351,7 @@ class LockstepBatch:
                 )
             for tag, result in ended:
                 run = self.active[tag]
-                optimum = local_optimum(result, self.config.env, self.config.ddpg)
+                optimum = self.optimum(result)
                 run.driver.record(run.request, optimum, result.seconds)
                 save_step(self.out, run.p, run.run, run.driver.state.trials, optimum)
                 if run.driver.finished or drained:
@@ -364,6 +397,8 @@ class LockstepBatch:
                 yielding = False  # without a checkpoint it would lose its searches
         if checkpoint is not None:
             remove_inflight(checkpoint)  # every run of the batch has ended
+        if isinstance(trainer, GymnasiumSlotTrainer):
+            trainer.close()
 
     def run(self) -> bool:
         """Train until every run has ended (or, past the drain time, until no search is in

@@ -39,6 +39,7 @@ from lonlib.experiment.runs import (
     experiment_task,
     hold_runs,
     open_run,
+    run_failure,
     run_lock_path,
     run_summary,
 )
@@ -95,11 +96,7 @@ def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict
         for state, _, optimum in driver.steps(experiment_local_search(config)):
             save_step(out, p, run, state.trials, optimum)
     except TaskEnvironmentError as error:  # what the run stored before stays
-        done = len(driver.state.trials)
-        raise TaskEnvironmentError(
-            f"run (p={p:g}, run={run}), local search {done}: {error} (its {done} stored "
-            "local search(es) are kept)"
-        ) from None
+        raise run_failure(p, run, len(driver.state.trials), error) from None
     return run_summary(p, run, driver.state)
 
 
@@ -349,7 +346,8 @@ class _Sampler:
                 self.workers,
                 wait,
                 lambda info: _refresh(bar, out, batch=info),
-                checkpoint_seconds=checkpoint_seconds,
+                # a Gymnasium task's batch is not checkpointed: its searches re-run
+                checkpoint_seconds=checkpoint_seconds if config.task is None else None,
                 drain_at=drain_at,
             )
             return

@@ -23,6 +23,7 @@ from lonlib.storage.inflight import Plan
 from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import load_run_state
+from lonlib.task.gymnasium_task import TaskEnvironmentError
 from lonlib.task.interface import task_of
 
 
@@ -79,6 +80,15 @@ def open_run(out: Path, config: ExperimentConfig, p: float, run: int) -> BasinHo
     bh = config.basin_hopping(p)
     state = load_run_state(out, p, run, bh)
     return BasinHoppingRun(initial_parameters(config, p, run), bh, config.run_seed(p, run), state)
+
+
+def run_failure(p: float, run: int, done: int, error: Exception) -> TaskEnvironmentError:
+    """The error of a run whose task environment failed in its local search ``done`` (the
+    ``done`` local searches it stored before are kept)."""
+    return TaskEnvironmentError(
+        f"run (p={p:g}, run={run}), local search {done}: {error} (its {done} stored "
+        "local search(es) are kept)"
+    )
 
 
 def run_summary(p: float, run: int, state: RunState) -> dict[str, Any]:

@@ -46,11 +46,14 @@ def test_a_bad_task_section_is_one_line_naming_the_field(task, names):
     assert names in str(error.value) and "\n" not in str(error.value)
 
 
-def test_a_task_refuses_pendulum_physics_and_the_lockstep_executor():
+def test_a_task_refuses_pendulum_physics_and_lockstep_for_a_foreign_learner():
     with pytest.raises(ValueError, match="env: the coupled pendulums' physics"):
         ExperimentConfig.from_mapping({"task": PENDULUM, "env": {"n_carts": 1}})
-    with pytest.raises(ValueError, match="executor: lockstep batches the coupled pendulums"):
-        ExperimentConfig.from_mapping({"task": PENDULUM, "executor": "lockstep"})
+    ExperimentConfig.from_mapping({"task": PENDULUM, "executor": "lockstep"})  # lonlib's DDPG
+    with pytest.raises(ValueError, match="executor: lockstep batches lonlib's DDPG"):
+        ExperimentConfig.from_mapping(
+            {"task": {**PENDULUM, "search": "sb3-td3"}, "executor": "lockstep"}
+        )
 
 
 def test_the_fitness_maps_the_range_onto_zero_one_and_clips():

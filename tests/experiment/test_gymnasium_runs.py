@@ -139,8 +139,9 @@ def test_an_environment_failing_mid_run_names_the_run_and_keeps_what_was_stored(
     np.testing.assert_array_equal(after["fitness"], before["fitness"])
 
 
-def test_a_gymnasium_task_gives_the_same_trials_on_dask(tmp_path):
-    """Worker processes (Dask's, as a process pool's) make the task themselves."""
+def test_a_gymnasium_task_gives_the_same_trials_on_dask_and_in_lockstep_processes(tmp_path):
+    """Worker processes (Dask's, as a process pool's, as lockstep batches') make the task
+    themselves."""
     config = ExperimentConfig.from_mapping(
         {
             **line_config().to_dict(),
@@ -157,6 +158,11 @@ def test_a_gymnasium_task_gives_the_same_trials_on_dask(tmp_path):
     )
     columns = ["p", "run", "index", "parent", "fitness", "accepted", "start_fitness"]
     assert serial[columns].equals(other[columns])
+    # and one lockstep batch per worker process (each makes the task and its vector env)
+    batches = run_experiment(
+        config, tmp_path / "batches", workers=2, executor="lockstep", slots=1, progress=False
+    )
+    assert serial[columns].equals(batches[columns])
 
 
 @pytest.mark.parametrize("name", ["pendulum-v1", "mountaincar-continuous"])
@@ -201,3 +207,35 @@ def test_verify_gymnasium_on_a_gymnasium_task_says_it_applies_to_the_pendulums_o
     printed = capsys.readouterr().out
     assert "verify: OK" in printed
     assert "info: [gymnasium]" in printed and "plain verify" in printed
+
+
+def test_lockstep_gives_a_gymnasium_task_the_serial_trials_and_drains(tmp_path):
+    """Three runs in lockstep batches of two slots (runs refill the slot a run ends in), a
+    first call drained at once and a second to the end: bit for bit the serial trials."""
+    from tests.experiment.test_drain import assert_same, snapshot
+
+    config = dataclasses.replace(line_config(), runs=3)
+    run_experiment(config, tmp_path / "serial", progress=False)
+    out = tmp_path / "lockstep"
+    lockstep = {"progress": False, "executor": "lockstep", "slots": 2}
+    drained = run_experiment(config, out, drain_after_seconds=0, **lockstep)
+    assert len(drained) == 2  # the first fill's searches, stored; nothing started after
+    run_experiment(config, out, **lockstep)
+    assert_same(snapshot(out), snapshot(tmp_path / "serial"))
+    assert verify_experiment(out).ok
+
+
+def test_an_environment_failing_in_a_lockstep_batch_names_its_run(tmp_path, monkeypatch):
+    out = tmp_path / "line"
+    config = line_config()
+    run_experiment(dataclasses.replace(config, max_local_searches=1), out, progress=False)
+    before = read_experiment_trials(out)
+    monkeypatch.setattr(Line, "FAULT", "nan-observation")
+    with pytest.raises(TaskEnvironmentError) as error:
+        run_experiment(
+            config, out, progress=False, executor="lockstep", allow_changes=("max_local_searches",)
+        )
+    text = str(error.value)
+    assert text.startswith("run (p=0.001, run=0), local search 1: local search: ")
+    assert "non-finite observation at step (step 3)" in text and "1 stored" in text
+    np.testing.assert_array_equal(read_experiment_trials(out)["fitness"], before["fitness"])

@@ -9,6 +9,7 @@ from pathlib import Path
 import yaml
 
 from lonlib.cli import main
+from lonlib.storage.trials import read_experiment_trials
 
 ROOT = Path(__file__).parents[2]
 PAGE = ROOT / "docs" / "your-task.md"
@@ -51,7 +52,15 @@ def test_every_command_of_the_page_runs_at_a_tiny_scale(tmp_path, monkeypatch, c
     (tmp_path / "data").mkdir()  # as in a clone
     monkeypatch.chdir(tmp_path)
     commands = page_commands()
-    assert [c[0] for c in commands] == ["run", "run", "status", "verify", "analyse", "record"]
+    assert [c[0] for c in commands] == [
+        "run",
+        "run",
+        "status",
+        "verify",
+        "analyse",
+        "record",
+        "run",  # the same experiment in lockstep
+    ]
     for argv in commands:
         main(argv)
         out = capsys.readouterr().out
@@ -61,6 +70,9 @@ def test_every_command_of_the_page_runs_at_a_tiny_scale(tmp_path, monkeypatch, c
     assert (folder / "figures" / "fig3_lon_p=0.001.png").exists()
     assert list((folder / "recordings").glob("best_optimum_*.rrd"))
     assert "verify: OK" in _verify(folder, capsys)
+    lockstep = read_experiment_trials(tmp_path / "data" / "my-pendulum-lockstep")
+    columns = ["p", "run", "index", "parent", "fitness", "accepted", "start_fitness"]
+    assert lockstep[columns].equals(read_experiment_trials(folder)[columns])
 
 
 def _verify(folder: Path, capsys) -> str:
