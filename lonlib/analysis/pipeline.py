@@ -308,7 +308,17 @@ def slug(text: str) -> str:
 
 
 def behaviour_hover(trials: pd.DataFrame) -> dict[str, str]:
-    """Node -> hover text with the main descriptor values of its stored behaviour."""
+    """Node -> hover text with the main descriptor values of its stored behaviour (a
+    Gymnasium task's descriptor: its label and every ``b_*`` value)."""
+    if "b_end_reason" not in trials:  # not the pendulums' descriptor
+        columns = [c for c in trials.columns if c.startswith("b_")]
+        return {
+            node_id(row["p"], row["run"], row["index"]): "<br>".join(
+                [str(row["label"])] + [f"{c[2:]} {row[c]:.4g}" for c in columns]
+            )
+            for row in trials.to_dict("records")
+            if isinstance(row.get("label"), str)
+        }
     out = {}
     for row, d in zip(trials.itertuples(), descriptors_of(trials), strict=True):
         if d is None:

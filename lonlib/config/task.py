@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -59,6 +60,12 @@ class GymnasiumTaskConfig:
     search: str = "ddpg"
     """The local search ``F``: ``ddpg`` (lonlib's, the paper's), or ``sb3-td3``,
     ``sb3-sac``, ``sb3-ddpg`` (Stable-Baselines3, the extra ``lonlib[sb3]``)."""
+    descriptor: str = ""
+    """Optional behaviour descriptor of every optimum, ``module:function``: called with the
+    optimum's scored greedy episode (:class:`lonlib.task.gymnasium_task.EpisodeTrace`), it
+    returns named numbers (stored as ``b_<name>`` columns of the trials table, replayed by
+    ``lonlib verify``) and optionally a ``label`` (text: the analysis groups optima by it, as
+    the pendulums' behaviour labels). Empty: no descriptor."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -82,6 +89,11 @@ class GymnasiumTaskConfig:
         check_range("task.eval_seed", self.eval_seed, 0, 2**32 - 1)
         check_choice("task.observation_scaling", self.observation_scaling, OBSERVATION_SCALINGS)
         check_choice("task.search", self.search, SEARCHES)
+        if self.descriptor and not DESCRIPTOR_FORM.fullmatch(self.descriptor):
+            raise ValueError(
+                "task.descriptor must name a function as module:function (e.g. "
+                f"mypackage.descriptors:swing), got {self.descriptor!r}"
+            )
         if not isinstance(self.kwargs, dict):
             raise ValueError(f"task.kwargs must be a mapping, got {self.kwargs!r}")
         try:
@@ -101,6 +113,8 @@ class GymnasiumTaskConfig:
         """Plain mapping (YAML/JSON friendly) that :meth:`from_mapping` reads back."""
         out = dataclasses.asdict(self)
         out["fitness_range"] = list(self.fitness_range)
+        if not out["descriptor"]:  # the stored form of a task without one stays as it was
+            del out["descriptor"]
         return out
 
     @classmethod
@@ -122,6 +136,9 @@ class GymnasiumTaskConfig:
         """The fitness of a greedy episode's return: ``fitness_range`` onto [0, 1], clipped."""
         low, high = self.fitness_range
         return min(1.0, max(0.0, (episode_return - low) / (high - low)))
+
+
+DESCRIPTOR_FORM = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*")
 
 
 def _finite_number(value: Any) -> bool:

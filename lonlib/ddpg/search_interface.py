@@ -15,6 +15,7 @@ from lonlib.ddpg.gymnasium_search import gymnasium_local_search
 from lonlib.ddpg.search import local_search
 from lonlib.search.algorithm import LocalOptimum, LocalSearch
 from lonlib.task.behaviour import describe_columns
+from lonlib.task.gymnasium_behaviour import describe_optimum
 from lonlib.task.gymnasium_task import GymnasiumTask
 
 
@@ -32,13 +33,21 @@ def ddpg_local_search(env_config, hp, describe_optima: bool = True) -> LocalSear
 
 def gymnasium_ddpg_local_search(task: GymnasiumTask, hp) -> LocalSearch:
     """``F`` on a Gymnasium task: lonlib's DDPG (:mod:`lonlib.ddpg.gymnasium_search`) bound
-    to the task and ``h``; optima carry no behaviour descriptor."""
+    to the task and ``h``; optima carry the task's behaviour descriptor if it has one."""
 
     def search(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
-        result = gymnasium_local_search(task, theta, omega, hp, seed)
-        return local_optimum(result, None, hp, describe_optima=False)
+        return task_optimum(gymnasium_local_search(task, theta, omega, hp, seed), task, hp)
 
     return search
+
+
+def task_optimum(result, task: GymnasiumTask, hp) -> LocalOptimum:
+    """A local search's result on a Gymnasium task as Algorithm 2's :class:`LocalOptimum`,
+    with the task's behaviour descriptor if it has one
+    (:func:`lonlib.task.gymnasium_behaviour.describe_optimum`)."""
+    optimum = local_optimum(result, None, hp, describe_optima=False)
+    behaviour = describe_optimum(task, result.theta)
+    return dataclasses.replace(optimum, behaviour=behaviour) if behaviour else optimum
 
 
 def local_optimum(result, env_config, hp, describe_optima: bool = True) -> LocalOptimum:

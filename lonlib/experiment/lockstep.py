@@ -38,7 +38,7 @@ import numpy as np
 from lonlib.config import DDPGConfig
 from lonlib.config.ddpg import check_batch_size
 from lonlib.ddpg.gymnasium_search import GymnasiumSlotTrainer, SlotEnvironmentError
-from lonlib.ddpg.search_interface import local_optimum
+from lonlib.ddpg.search_interface import local_optimum, task_optimum
 from lonlib.ddpg.slots import LocalSearchResult
 from lonlib.ddpg.trainer import SlotTrainer
 from lonlib.experiment.checkpoints import (
@@ -267,10 +267,10 @@ class LockstepBatch:
             raise run_failure(run.p, run.run, len(run.driver.state.trials), error) from None
 
     def optimum(self, result: LocalSearchResult) -> LocalOptimum:
-        """Algorithm 2's optimum of a finished search (a pendulum optimum with its behaviour
-        descriptor)."""
+        """Algorithm 2's optimum of a finished search, with its behaviour descriptor (a
+        Gymnasium task's, if it has one)."""
         if self.config.task is not None:
-            return local_optimum(result, None, self.config.ddpg, describe_optima=False)
+            return task_optimum(result, experiment_task(self.config), self.config.ddpg)
         return local_optimum(result, self.config.env, self.config.ddpg)
 
     def may_fill(self) -> bool:

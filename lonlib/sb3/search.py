@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from lonlib.config import DDPGConfig
-from lonlib.ddpg.search_interface import local_optimum
+from lonlib.ddpg.search_interface import task_optimum
 from lonlib.ddpg.slots import LocalSearchResult
 from lonlib.sb3.callback import JudgingCallback
 from lonlib.sb3.env import TrainingEnv
@@ -70,11 +70,10 @@ def sb3_local_search(
 
 def sb3_gymnasium_local_search(task: GymnasiumTask, hp: DDPGConfig, search: str) -> LocalSearch:
     """``F`` on a Gymnasium task: SB3's ``search`` bound to the task and ``h``; optima carry
-    no behaviour descriptor."""
+    the task's behaviour descriptor if it has one."""
 
     def run(theta: np.ndarray, omega: np.ndarray, seed: int) -> LocalOptimum:
-        result = sb3_local_search(task, theta, omega, hp, seed, search)
-        return local_optimum(result, None, hp, describe_optima=False)
+        return task_optimum(sb3_local_search(task, theta, omega, hp, seed, search), task, hp)
 
     return run
 

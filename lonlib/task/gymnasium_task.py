@@ -113,6 +113,11 @@ class GymnasiumTask:
         self.action_size = int(action_space.shape[0])
         self.action_low, self.action_span = low, high - low
         self._obs_centre, self._obs_scale = observation_scaling(observation_space, config)
+        self.descriptor = None
+        if config.descriptor:  # imported now: a wrong name stops before any compute
+            from lonlib.task.gymnasium_behaviour import load_descriptor
+
+            self.descriptor = load_descriptor(config.descriptor)
         self.episode_steps = int(config.episode_steps or self.env.spec.max_episode_steps or 0)
         if self.episode_steps <= 0:
             raise ValueError(

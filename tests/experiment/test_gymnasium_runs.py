@@ -5,6 +5,7 @@ fails mid-run stops the run with its name while what was stored stays."""
 import dataclasses
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from lonlib.analysis import analyse
@@ -239,3 +240,33 @@ def test_an_environment_failing_in_a_lockstep_batch_names_its_run(tmp_path, monk
     assert text.startswith("run (p=0.001, run=0), local search 1: local search: ")
     assert "non-finite observation at step (step 3)" in text and "1 stored" in text
     np.testing.assert_array_equal(read_experiment_trials(out)["fitness"], before["fitness"])
+
+
+def test_a_task_descriptor_is_stored_replayed_and_grouped_by(tmp_path):
+    """``task.descriptor``: every optimum stores its ``b_*`` values and label, in serial and
+    in lockstep alike; verify replays them (an edited value is an error); the analysis
+    groups optima by the label."""
+    import json
+
+    from tests.conftest import reseal
+
+    descriptor = "tests.task.test_gymnasium_behaviour:line_position"
+    config = line_config(descriptor=descriptor)
+    out = tmp_path / "line"
+    trials = run_experiment(config, out, progress=False)
+    assert {"b_end_distance", "b_steps", "label"} <= set(trials.columns)
+    assert (trials["b_steps"] == 20).all() and set(trials["label"]) <= {"near", "far"}
+    lockstep = run_experiment(config, tmp_path / "lockstep", executor="lockstep", progress=False)
+    assert trials.drop(columns="seconds").equals(lockstep.drop(columns="seconds"))
+    report = verify_experiment(out)
+    assert report.ok and any(f.check == "descriptor" for f in report.findings)
+    result = analyse(out, close_figures=True)
+    assert set(result.behaviours["label"]) == set(trials["label"])
+    path = next(out.glob("p=*/run_0000/trials.parquet"))
+    table = pd.read_parquet(path)
+    table.loc[0, "b_end_distance"] += 0.25
+    table.to_parquet(path)
+    reseal(out)  # as if lonlib had written it: the replay, not the seal, must find it
+    report = verify_experiment(out)
+    assert not report.ok and [f.check for f in report.errors] == ["descriptor"]
+    assert json.loads((out / "manifest.json").read_text())["config"]["task"]["descriptor"]

@@ -1,0 +1,138 @@
+"""Optional behaviour descriptors of a Gymnasium task's optima (``task.descriptor``).
+
+The pendulums describe every optimum by what its scored episode did (:mod:`lonlib.task.behaviour`);
+a Gymnasium task can too, by a function of the user's, named ``module:function`` in the
+task's configuration. It is called with the optimum's scored greedy episode, step by step
+(:class:`EpisodeTrace`: the environment's own observations, actions and rewards, recorded by a
+wrapper around the episode that scores the fitness), and returns a mapping of named numbers
+and optionally a ``label`` (text). They are stored with the trial as ``b_<name>`` columns and
+``label`` (:func:`describe_optimum`), replayed by ``lonlib verify``, and the analysis groups
+optima by the label (Figs. 4 and 5 coloured by it, the behaviours table, the behavioural LON).
+
+A descriptor must be a deterministic function of the episode (it is replayed); a wrong
+return (not a mapping, a name that is not an identifier, a value that is not a finite number,
+a label that is not text) raises ValueError naming ``task.descriptor`` and the entry.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium
+import numpy as np
+
+from lonlib.task.gymnasium_task import Episode, GymnasiumTask
+
+PREFIX = "b_"  # the trials table's behaviour columns, as the pendulums'
+NAME = re.compile(r"[A-Za-z_]\w*")
+
+
+@dataclass(frozen=True)
+class EpisodeTrace:
+    """One scored greedy episode of an Actor, step by step (what a descriptor reads)."""
+
+    observations: np.ndarray
+    """``[T + 1, o]``: the environment's observations (not scaled), from ``reset`` on."""
+    actions: np.ndarray
+    """``[T, a]``: the actions the environment received (in its Box bounds)."""
+    rewards: np.ndarray
+    """``[T]``: the rewards."""
+    episode: Episode
+    """Its return, length, end and fitness (the stored fitness)."""
+
+
+Descriptor = Callable[[EpisodeTrace], Mapping[str, Any]]
+
+
+def load_descriptor(name: str) -> Descriptor:
+    """The function ``module:function`` names (ValueError naming ``task.descriptor``)."""
+    module_name, _, function_name = name.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as error:
+        raise ValueError(f"task.descriptor: cannot import {module_name!r} ({error})") from None
+    function = getattr(module, function_name, None)
+    if not callable(function):
+        raise ValueError(f"task.descriptor: {module_name!r} has no function {function_name!r}")
+    return function  # type: ignore[no-any-return]
+
+
+class _Recorder(gymnasium.Wrapper):  # type: ignore[type-arg]
+    """Passes every call through and keeps the raw observations, actions and rewards."""
+
+    def __init__(self, env: Any) -> None:
+        super().__init__(env)
+        self.observations: list[np.ndarray] = []
+        self.actions: list[np.ndarray] = []
+        self.rewards: list[float] = []
+
+    def reset(self, **kwargs: Any) -> Any:
+        observation, info = self.env.reset(**kwargs)
+        self.observations.append(np.array(observation, dtype=np.float64))
+        return observation, info
+
+    def step(self, action: Any) -> Any:
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        self.actions.append(np.array(action, dtype=np.float64))
+        self.observations.append(np.array(observation, dtype=np.float64))
+        self.rewards.append(float(reward))
+        return observation, reward, terminated, truncated, info
+
+
+def trace_episode(task: GymnasiumTask, theta: np.ndarray, where: str) -> EpisodeTrace:
+    """The greedy episode that scores ``theta`` (:meth:`GymnasiumTask.greedy_episode`),
+    recorded step by step."""
+    recorder = _Recorder(task.env)
+    episode = task.greedy_episode(theta, where, env=recorder)
+    return EpisodeTrace(
+        observations=np.stack(recorder.observations),
+        actions=np.stack(recorder.actions),
+        rewards=np.array(recorder.rewards),
+        episode=episode,
+    )
+
+
+def describe_optimum(
+    task: GymnasiumTask, theta: np.ndarray, where: str = "behaviour descriptor"
+) -> dict[str, Any]:
+    """The stored behaviour of the Actor ``theta`` under the task's descriptor: ``b_<name>``
+    floats and, if the descriptor gives one, ``label``; empty without a descriptor."""
+    if not task.config.descriptor:
+        return {}
+    described = task.descriptor(trace_episode(task, theta, where))
+    return behaviour_columns(described, task.config.descriptor)
+
+
+def behaviour_columns(described: Any, name: str) -> dict[str, Any]:
+    """A descriptor's return as trials-table columns, checked (ValueError naming it)."""
+    field = f"task.descriptor ({name})"
+    if not isinstance(described, Mapping):
+        raise ValueError(f"{field} must return a mapping of names to numbers, got {described!r}")
+    columns: dict[str, Any] = {}
+    for key, value in described.items():
+        if key == "label":
+            if not isinstance(value, str) or not value:
+                raise ValueError(f"{field}: label must be non-empty text, got {value!r}")
+            columns["label"] = value
+            continue
+        if not isinstance(key, str) or not NAME.fullmatch(key):
+            raise ValueError(f"{field}: {key!r} is not a name (letters, digits, _)")
+        number = value.item() if isinstance(value, np.generic) else value
+        if not isinstance(number, (int, float)) or not math.isfinite(float(number)):
+            raise ValueError(f"{field}: {key} must be a finite number, got {value!r}")
+        columns[PREFIX + key] = float(number)
+    return columns
+
+
+__all__ = [
+    "EpisodeTrace",
+    "behaviour_columns",
+    "describe_optimum",
+    "load_descriptor",
+    "trace_episode",
+]
