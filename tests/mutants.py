@@ -271,7 +271,7 @@ MUTANTS = [
     ),
     Mutant(
         DIGESTS,
-        "stale = [name for name in sorted(listed) if _drawn_from(figures, name) != now]",
+        "stale = [name for name in sorted(drawn) if drawn[name] != now]",
         "stale: list[str] = []",
         "stale figures are not reported",
     ),

@@ -35,7 +35,11 @@ as *pending*, never as tampered: files of a trial the table lacks are leftovers 
 overwrites; a trial sealed ahead of a table write that did not happen is redone by the next
 process that takes the run (:func:`drop_unwritten_trials`); a run chain longer than the root's
 count is recorded in the root at the next session. A row the run's digests do not seal, and
-anything else that differs, is tampered data.
+anything else that differs, is tampered data. ``lonlib analyse`` and ``lonlib record`` write
+their outputs under temporary names, seal their digests ahead in the root
+(:func:`seal_outputs_ahead`: ``figures.next``, ``recordings_next``), rename them into place and
+reseal (:func:`reseal_outputs`; :mod:`lonlib.storage.outputs`): killed part-way, each output
+is as sealed or as sealed ahead (pending), and the same command again completes it.
 
 A folder that is not an experiment (a study's summaries) gets a ``files`` seal: each file's
 digest (:func:`seal_files`, :func:`check_files_seal`).
@@ -253,11 +257,12 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
         for v in runs.values()
     ):
         return "'runs' is not a mapping of runs to their trial count and head"
-    recordings = payload.get("recordings", {})
-    if not isinstance(recordings, dict) or not all(
-        isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
-    ):
-        return "'recordings' is not a mapping of recordings to their trial and digest"
+    for name in ("recordings", "recordings_next"):
+        recordings = payload.get(name, {})
+        if not isinstance(recordings, dict) or not all(
+            isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
+        ):
+            return f"'{name}' is not a mapping of recordings to their trial and digest"
     for name in ("result_path_versions", "result_path_versions_next"):
         if name in payload and not isinstance(payload[name], list):
             return f"'{name}' is not a list"
@@ -269,6 +274,14 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
     drawn = figures.get("inputs_of", {})
     if not isinstance(drawn, dict) or not all(v is None or _is_digest(v) for v in drawn.values()):
         return "'figures.inputs_of' is not a mapping of figures to digests"
+    ahead = figures.get("next", {})
+    if not (
+        isinstance(ahead, dict)
+        and isinstance(ahead.get("files", {}), dict)
+        and all(v is None or _is_digest(v) for v in ahead.get("files", {}).values())
+        and (ahead.get("inputs") is None or _is_digest(ahead.get("inputs")))
+    ):
+        return "'figures.next' is not a mapping of figures to digests (or None) and their inputs"
     return None
 
 
@@ -379,6 +392,21 @@ def _drawn_from(figures: Mapping[str, Any], name: str) -> str | None:
     return value if isinstance(value, str) else None
 
 
+def _figures_ahead(root: Path, figures: Mapping[str, Any]) -> dict[str, tuple[str | None, Any]]:
+    """The figures sealed ahead (``figures.next``, :func:`seal_outputs_ahead`) that the
+    folder holds as sealed ahead: name → (its new digest and the inputs it was drawn from),
+    or (None, None) for a figure whose removal was sealed ahead and that is gone."""
+    ahead = figures.get("next") or {}
+    out: dict[str, tuple[str | None, Any]] = {}
+    for name, digest in ahead.get("files", {}).items():
+        path = Path(root) / name
+        if digest is None and not path.is_file():
+            out[name] = (None, None)
+        elif digest is not None and path.is_file() and file_digest(path) == digest:
+            out[name] = (digest, ahead.get("inputs"))
+    return out
+
+
 def _figures_seal(
     root: Path,
     inputs: str,
@@ -389,13 +417,15 @@ def _figures_seal(
     """The root's figures: the files ``written`` (their digests; drawn from ``inputs`` but
     for those ``stale`` names, drawn from the inputs given there), and the files of an
     earlier analysis that are still there and were not written again, as they were sealed
-    (digest and inputs): an analysis without the conditioning keeps the conditioning's."""
+    (digest and inputs; as sealed ahead where the file holds that, an analysis that stopped
+    part-way): an analysis without the conditioning keeps the conditioning's."""
     files = {Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in written}
     drawn = {name: stale[name] for name in files if name in stale}
-    for name, digest in (old or {}).get("files", {}).items():
+    old = old or {}
+    ahead = {n: v for n, v in _figures_ahead(root, old).items() if v[0] is not None}
+    for name in sorted({*old.get("files", {}), *ahead}):
         if name not in files and (root / name).is_file():
-            files[name] = digest
-            recorded = _drawn_from(old or {}, name)
+            files[name], recorded = ahead.get(name) or (old["files"][name], _drawn_from(old, name))
             if recorded != inputs:
                 drawn[name] = recorded
     entry: dict[str, Any] = {"inputs": inputs, "files": dict(sorted(files.items()))}
@@ -412,6 +442,8 @@ def write_root(
     figures: Iterable[Path] | None = None,
     stale_figures: Mapping[str, str | None] | None = None,
     next_manifest: Mapping[str, Any] | None = None,
+    figures_ahead: Mapping[str, str | None] | None = None,
+    recordings_ahead: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> None:
     """Write the root seal from the runs' chains as they are now, the manifest's
     configuration, and (given) the recordings index (file name → its trial's ``p``, ``run``,
@@ -420,7 +452,11 @@ def write_root(
     drawn from other inputs, name → that digest or None); what is not given is kept from the
     current root. ``next_manifest``: a manifest about to replace ``manifest`` with changed
     settings (sealed ahead, so that a kill between the two writes leaves either accepted).
-    The caller holds the manifest lock and has checked what it read."""
+    ``figures_ahead`` (name → the digest of its new content, None: to be removed) and
+    ``recordings_ahead`` (the index the recordings folder is about to hold, each with its
+    ``sha256``): outputs sealed ahead of their renames (:func:`seal_outputs_ahead`); the
+    figures or recordings given later settle them. The caller holds the manifest lock and
+    has checked what it read."""
     root = Path(root)
     old = _read(root / SEAL_NAME) if is_sealed(root) else {}
     seal: dict[str, Any] = {
@@ -447,12 +483,21 @@ def write_root(
         }
     elif "recordings" in old:
         seal["recordings"] = old["recordings"]
+    if recordings_ahead is not None:
+        seal["recordings_next"] = {n: dict(info) for n, info in sorted(recordings_ahead.items())}
+    elif recordings is None and "recordings_next" in old:
+        seal["recordings_next"] = old["recordings_next"]
     if figures is not None:
         seal["figures"] = _figures_seal(
             root, inputs_digest(seal), old.get("figures"), figures, stale_figures or {}
         )
     elif "figures" in old:
         seal["figures"] = old["figures"]
+    if figures_ahead is not None:
+        seal["figures"] = {
+            **seal.get("figures", {"files": {}}),
+            "next": {"inputs": inputs_digest(seal), "files": dict(sorted(figures_ahead.items()))},
+        }
     _write(root / SEAL_NAME, seal)
 
 
@@ -501,11 +546,14 @@ def stale_figures(root: Path) -> dict[str, str | None]:
     root = Path(root)
     seal = _read(root / SEAL_NAME) if is_sealed(root) else {}
     figures = seal.get("figures", {})
+    ahead = _figures_ahead(root, figures)
     now = _inputs_now(root, seal) if seal else None
     out: dict[str, str | None] = {}
     for path in figure_files(root):
         name = path.relative_to(root).as_posix()
         drawn = _drawn_from(figures, name) if name in figures.get("files", {}) else None
+        if name in ahead:  # as an analysis that stopped part-way sealed it ahead
+            drawn = ahead[name][1]
         if drawn is None or drawn != now:
             out[name] = drawn
     return out
@@ -579,6 +627,31 @@ def reseal_outputs(
             figures=kept,
             stale_figures=stale_figures,
         )
+    return True
+
+
+def seal_outputs_ahead(
+    root: Path,
+    *,
+    figures: Mapping[str, str | None] | None = None,
+    recordings: Mapping[str, Mapping[str, Any]] | None = None,
+) -> bool:
+    """Before ``lonlib analyse`` or ``lonlib record`` puts its outputs in place (each file
+    written under a temporary name first, then renamed): ``figures`` (name relative to the
+    root → the digest of its new content, None for a figure it removes) or ``recordings``
+    (the index the recordings folder will hold, each entry with its ``sha256``) sealed
+    ahead in the root, under the manifest lock, so that a kill between two renames, or
+    before the reseal (:func:`reseal_outputs`) that settles them, leaves every file
+    accepted as sealed or as sealed ahead (pending, never tampered). Nothing in an unsealed
+    folder (returns False)."""
+    from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
+    from lonlib.storage.lock import exclusive_lock
+
+    root = Path(root)
+    if not is_sealed(root):
+        return False
+    with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
+        write_root(root, read_manifest(root), figures_ahead=figures, recordings_ahead=recordings)
     return True
 
 
@@ -671,7 +744,7 @@ def check_experiment_seal(
         run = _SealedRun(key, folder, sealed_runs.get(key), seal.get("chain_config"))
         _check_run(check, run, files)
     if recordings:
-        _check_recordings(check, root, seal.get("recordings"))
+        _check_recordings(check, root, seal.get("recordings"), seal.get("recordings_next"))
     if figures:
         _check_figures(check, root, seal)
     return check
@@ -881,14 +954,35 @@ def _check_stray_files(
 
 
 def _check_recordings(
-    check: SealCheck, root: Path, index: Mapping[str, Mapping[str, Any]] | None
+    check: SealCheck,
+    root: Path,
+    index: Mapping[str, Mapping[str, Any]] | None,
+    ahead: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> None:
+    """The recordings against the index (a recording that holds what ``ahead``, the index
+    sealed ahead of a ``lonlib record`` that stopped before it resealed, lists is pending)."""
     folder = root / RECORDINGS_FOLDER
     present = {p.name for p in folder.glob("*.rrd")} if folder.is_dir() else set()
+    if ahead:
+        check.pending.append(
+            (
+                SEAL_NAME,
+                "recordings sealed ahead of a `lonlib record` that stopped before it finished "
+                "putting them in place: `lonlib record` again completes it",
+            )
+        )
+    new = {  # a recording put in place as sealed ahead
+        name
+        for name in present & set(ahead or {})
+        if file_digest(folder / name) == (ahead or {})[name].get("sha256")
+    }
     listed = dict(index or {})
-    if index is None and present:
+    if index is None and present - new:
         check.problems.append(
-            (RECORDINGS_FOLDER, f"{len(present)} recordings and no recordings index in the seal")
+            (
+                RECORDINGS_FOLDER,
+                f"{len(present - new)} recordings and no recordings index in the seal",
+            )
         )
         return
     for name in sorted(set(listed) - present):
@@ -904,9 +998,9 @@ def _check_recordings(
                 f"{info.get('index')} (f = {info.get('fitness')}) is {what}",
             )
         )
-    for name in sorted(present - set(listed)):
+    for name in sorted(present - set(listed) - new):
         check.problems.append((f"{RECORDINGS_FOLDER}/{name}", "not in the recordings index"))
-    for name in sorted(present & set(listed)):
+    for name in sorted((present & set(listed)) - new):
         if file_digest(folder / name) != listed[name].get("sha256"):
             check.problems.append(
                 (
@@ -921,8 +1015,21 @@ def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> Non
     folder the seal does not list, and whether they were drawn from the trials as they are."""
     figures = seal.get("figures") or {}
     listed = dict(figures.get("files", {}))
+    ahead = _figures_ahead(root, figures)  # those there as sealed ahead (or removed so)
+    if "next" in figures:
+        check.pending.append(
+            (
+                SEAL_NAME,
+                "figures and tables sealed ahead of a `lonlib analyse` that stopped before it "
+                "finished putting them in place: `lonlib analyse` again completes it",
+            )
+        )
+    drawn = {name: _drawn_from(figures, name) for name in listed}
+    drawn.update({name: inputs for name, (digest, inputs) in ahead.items() if digest})
     for name, digest in sorted(listed.items()):
         path = root / name
+        if name in ahead:
+            continue  # as sealed ahead (or removed so)
         if not path.is_file():
             check.problems.append(
                 (name, "a sealed figure or table is missing (`lonlib analyse` regenerates it)")
@@ -933,6 +1040,8 @@ def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> Non
             )
     for path in figure_files(root):
         name = path.relative_to(root).as_posix()
+        if name in ahead:
+            continue
         if name not in listed:
             check.problems.append(
                 (
@@ -941,13 +1050,14 @@ def _check_figures(check: SealCheck, root: Path, seal: Mapping[str, Any]) -> Non
                     "analysis that stopped before sealing it: `lonlib analyse` again)",
                 )
             )
-    now = _inputs_now(root, seal) if listed else None
-    stale = [name for name in sorted(listed) if _drawn_from(figures, name) != now]
+    drawn = {name: inputs for name, inputs in drawn.items() if (root / name).is_file()}
+    now = _inputs_now(root, seal) if drawn else None
+    stale = [name for name in sorted(drawn) if drawn[name] != now]
     if stale:
         check.pending.append(
             (
                 FIGURES_FOLDER,
-                f"{len(stale)} of {len(listed)} figures and tables ({stale[0]}"
+                f"{len(stale)} of {len(drawn)} figures and tables ({stale[0]}"
                 f"{', ...' if len(stale) > 1 else ''}) made from an earlier state of the "
                 "trials (stale): `lonlib analyse` again",
             )
@@ -1122,6 +1232,7 @@ __all__ = [
     "row_digests",
     "seal_ahead",
     "seal_files",
+    "seal_outputs_ahead",
     "settle_ahead",
     "seal_runs",
     "stale_figures",

@@ -812,9 +812,9 @@ def test_sealing_refuses_mismatches_reported_as_warnings(small, copy, capsys):
 
 
 def test_a_record_killed_before_its_reseal_is_repaired_by_recording_again(small, copy):
-    """``record`` rewrote a recording, then was killed before resealing it: verify says
-    `lonlib record` regenerates it, and recording again does (its own output); a recording
-    it would not write stays a refusal."""
+    """``record`` rewrote a recording in place (as an older lonlib did), then was killed before
+    resealing it: verify says `lonlib record` regenerates it, and recording again does (its
+    own output); a recording it would not write stays a refusal."""
     from lonlib.analysis.pipeline import record_optima
 
     (path,) = record_optima(copy, limit=1)
