@@ -140,11 +140,26 @@ def analyse(
     once, for the figures, the claims and the conditioning."""
     if not isinstance(experiment, StoredExperiment):
         experiment = StoredExperiment.load(experiment, fitness_tolerance)
+    with staging_folder(experiment.folder / "figures") as out:  # every file here first
+        result, removed = _draw(experiment, out, seed, bins, close_figures, conditioning)
+        result.files = publish_figures(experiment.folder, result.files, removed)
+    return result
+
+
+def _draw(
+    experiment: StoredExperiment,
+    out: Path,
+    seed: int,
+    bins: int,
+    close_figures: bool,
+    conditioning: bool,
+) -> tuple[Analysis, list[str]]:
+    """What :func:`analyse` writes, written into ``out`` (its staging folder): the analysis
+    and the names of the files an earlier analysis left that this one no longer makes."""
     folder, trials = experiment.folder, experiment.trials
     fitness_tolerance = experiment.fitness_tolerance
-    out = staging_folder(folder / "figures")  # every file here first, then put in place
     result = Analysis(metrics=pd.DataFrame(), peaks=pd.DataFrame())
-    removed: list[str] = []  # files of an earlier analysis that this one no longer makes
+    removed: list[str] = []
 
     def save(name: str, fig: plt.Figure) -> None:
         path = save_png(fig, out / f"{name}.png")
@@ -206,8 +221,7 @@ def analyse(
         table.to_csv(path, index=False)
         result.files.append(path)
     if not pendulums:
-        result.files = publish_figures(folder, result.files)
-        return result
+        return result, removed
     result.claims = claims_of_landscapes(experiment.landscapes, bins)
     result.claim_peaks = peaks_of_landscapes(experiment.landscapes, bins)
     result.claim_d_curve = claim_d_curve(trials)
@@ -224,8 +238,7 @@ def analyse(
         save("sensitivity", sensitivity(result.metrics))
     if conditioning:
         _conditioning(experiment, result, save, out, bins, removed)
-    result.files = publish_figures(folder, result.files, removed)
-    return result
+    return result, removed
 
 
 GENERIC_TASK_SKIPS = (
@@ -401,28 +414,28 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
         ours = {f"recordings/{_recording_name(r)}" for r in selection.itertuples()}
         check.problems = [(name, what) for name, what in check.problems if name not in ours]
         check.raise_if_tampered("lonlib record")
-    staging = staging_folder(folder / "recordings")  # each recording here first
-    paths: list[Path] = []
-    task = None if config.task is None else task_of(config)
-    for row in selection.itertuples():
-        optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
-        path = staging / _recording_name(row)
-        title = f"{row.role} p={p_label(row.p)}"
-        properties: dict[str, float | int | str] = {
-            "p": float(row.p),
-            "run": int(row.run),
-            "index": int(row.index),
-            "stored_fitness": float(row.fitness),
-        }
-        if task is None:
-            record(optimum.theta, config.env, path, title, config.ddpg.scoring, properties)
-        else:
-            _, no_frames = record_task(task, optimum.theta, path, title, properties)
-            if no_frames and not paths:
-                warnings.warn(f"recordings without frames: {no_frames}", stacklevel=2)
-        paths.append(path)
-    staged = list(dict.fromkeys(paths))
-    # the index the folder will hold: the recordings there, those staged in their place
-    index = {**recordings_index(folder), **recordings_index(folder, files=staged)}
-    publish_recordings(folder, staged, dict(sorted(index.items())))
+    with staging_folder(folder / "recordings") as staging:  # each recording here first
+        paths: list[Path] = []
+        task = None if config.task is None else task_of(config)
+        for row in selection.itertuples():
+            optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
+            path = staging / _recording_name(row)
+            title = f"{row.role} p={p_label(row.p)}"
+            properties: dict[str, float | int | str] = {
+                "p": float(row.p),
+                "run": int(row.run),
+                "index": int(row.index),
+                "stored_fitness": float(row.fitness),
+            }
+            if task is None:
+                record(optimum.theta, config.env, path, title, config.ddpg.scoring, properties)
+            else:
+                _, no_frames = record_task(task, optimum.theta, path, title, properties)
+                if no_frames and not paths:
+                    warnings.warn(f"recordings without frames: {no_frames}", stacklevel=2)
+            paths.append(path)
+        staged = list(dict.fromkeys(paths))
+        # the index the folder will hold: the recordings there, those staged in their place
+        index = {**recordings_index(folder), **recordings_index(folder, files=staged)}
+        publish_recordings(folder, staged, dict(sorted(index.items())))
     return [folder / "recordings" / path.name for path in paths]

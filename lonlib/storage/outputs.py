@@ -9,7 +9,8 @@ into, and git ignores as a temporary); then their digests are sealed ahead in th
 (:func:`lonlib.storage.digests.seal_outputs_ahead`); then each is renamed into place (a
 figure an analysis no longer makes is removed); then the root is resealed
 (:func:`lonlib.storage.digests.reseal_outputs`), which settles what was sealed ahead; then the
-hidden folder is removed. A kill while the outputs are written leaves the folder as it was
+hidden folder is removed. One command at a time writes a folder's outputs (its lock,
+:data:`OUTPUTS_LOCK`). A kill while the outputs are written leaves the folder as it was
 (and the hidden folder, which the next run empties first); a kill after the seal ahead leaves
 each output as sealed or as sealed ahead, which ``lonlib verify`` reports as pending, and the
 same command again completes. An unsealed folder gets the same renames, and no seal.
@@ -20,29 +21,38 @@ from __future__ import annotations
 import errno
 import os
 import shutil
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from lonlib.storage.atomic import write_error
 from lonlib.storage.digests import file_digest, reseal_outputs, seal_outputs_ahead
+from lonlib.storage.lock import exclusive_lock
 
 STAGING = ".staging.tmp"
 """The hidden folder, inside the outputs' folder, where they are written first."""
+OUTPUTS_LOCK = ".lock"
+"""Inside the outputs' folder: held while they are written and put in place."""
 
 
-def staging_folder(folder: Path) -> Path:
-    """An empty hidden folder inside ``folder`` (created, with ``folder``, if missing) to write
-    outputs into before :func:`publish_figures` or :func:`publish_recordings` puts them in
-    place; what a killed command left there is removed first. Use the outputs' own file
-    names (a rerun recording's id is made from its name)."""
-    staging = Path(folder) / STAGING
-    try:
-        shutil.rmtree(staging, ignore_errors=True)
-        staging.mkdir(parents=True)
-    except OSError as error:
-        raise write_error(staging, error) from error
-    return staging
+@contextmanager
+def staging_folder(folder: Path) -> Iterator[Path]:
+    """For the ``with`` block: an empty hidden folder inside ``folder`` (created, with
+    ``folder``, if missing) to write outputs into before :func:`publish_figures` or
+    :func:`publish_recordings` (called in the block) puts them in place. ``folder``'s lock
+    (:data:`OUTPUTS_LOCK`) is held meanwhile: another ``analyse`` or ``record`` of the same
+    folder waits, and what a killed one left in the hidden folder is removed first. Use the
+    outputs' own file names (a rerun recording's id is made from its name)."""
+    folder = Path(folder)
+    with exclusive_lock(folder / OUTPUTS_LOCK, record_holder=False):
+        staging = folder / STAGING
+        try:
+            shutil.rmtree(staging, ignore_errors=True)
+            staging.mkdir()
+        except OSError as error:
+            raise write_error(staging, error) from error
+        yield staging
 
 
 def publish_figures(root: Path, staged: Iterable[Path], removed: Iterable[str] = ()) -> list[Path]:
@@ -145,4 +155,4 @@ def _rename(staged: list[Path], folder: Path, gone: Iterable[str]) -> None:
         raise write_error(folder, error) from error
 
 
-__all__ = ["STAGING", "publish_figures", "publish_recordings", "staging_folder"]
+__all__ = ["OUTPUTS_LOCK", "STAGING", "publish_figures", "publish_recordings", "staging_folder"]

@@ -220,17 +220,16 @@ def test_a_figure_removed_sealed_ahead_is_not_missing(sampled, tmp_path, monkeyp
     out = copy_of(sampled, tmp_path)
     analyse(out, close_figures=True)
     assert (out / "figures" / "claims_robust.csv").is_file()
-    staged = staging_folder(out / "figures") / "metrics.csv"
-    staged.write_text("p\n0.001\n")
     kill_at(monkeypatch, point)
-    with pytest.raises(Killed):
-        publish_figures(out, [staged], removed=["claims_robust.csv"])
+    with pytest.raises(Killed), staging_folder(out / "figures") as staging:
+        (staging / "metrics.csv").write_text("p\n0.001\n")
+        publish_figures(out, [staging / "metrics.csv"], removed=["claims_robust.csv"])
     monkeypatch.undo()
     assert_not_tampered(out)
     assert (out / "figures" / "claims_robust.csv").exists() == (point == "seal.json#1")
-    staged = staging_folder(out / "figures") / "metrics.csv"
-    staged.write_text("p\n0.001\n")
-    publish_figures(out, [staged], removed=["claims_robust.csv"])
+    with staging_folder(out / "figures") as staging:
+        (staging / "metrics.csv").write_text("p\n0.001\n")
+        publish_figures(out, [staging / "metrics.csv"], removed=["claims_robust.csv"])
     assert not (out / "figures" / "claims_robust.csv").exists()
     assert_complete(out)
 
