@@ -54,8 +54,8 @@ from lonlib.storage.digests import (
     seal_runs,
     stale_figures,
 )
-from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, optimum_path, read_manifest
-from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
+from lonlib.storage.layout import MANIFEST_LOCK, optimum_path, read_manifest
+from lonlib.storage.lock import exclusive_lock, sampling_lock_or_refuse
 from lonlib.storage.result_path import KNOWN_RESULT_PATH_VERSIONS, RESULT_PATH_VERSION
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, describe_actors, label
@@ -404,12 +404,7 @@ def seal_experiment(report: VerifyReport) -> None:
     if not report.recordings_checked:
         raise ValueError("--seal seals the recordings too: run it without --no-recordings")
     folder = report.folder
-    sampling = SamplingLock(folder / SAMPLING_LOCK)
-    try:
-        sampling.acquire(exclusive=True)
-    except LockHeld:
-        raise ValueError(f"{folder}: a sampling session is running; seal it once it ends") from None
-    try:
+    with sampling_lock_or_refuse(folder, "seal"):
         with exclusive_lock(folder / MANIFEST_LOCK, record_holder=False):
             stale = stale_figures(folder)  # before the runs' chains are sealed again
             seal_runs(folder, read_manifest(folder))
@@ -419,8 +414,6 @@ def seal_experiment(report: VerifyReport) -> None:
             recordings=recordings_index(folder),
             stale_figures=stale,
         )
-    finally:
-        sampling.release()
 
 
 REPLAY_CHECKS = ("fitness", "descriptor", "label", "consistency", "start", "recording")

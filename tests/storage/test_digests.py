@@ -230,6 +230,28 @@ def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, c
         load_experiment(copy)
 
 
+def test_sealing_refuses_a_folder_a_session_is_sampling(small, copy, capsys):
+    """``verify --seal`` rewrites the runs' digests that a session appends to: while a session
+    holds the sampling lock (shared) it refuses in one line and seals nothing."""
+    from lonlib.storage.layout import SAMPLING_LOCK
+    from lonlib.storage.lock import SamplingLock
+
+    unseal(copy)
+    session = SamplingLock(copy / SAMPLING_LOCK)
+    session.acquire(exclusive=False)
+    try:
+        with pytest.raises(SystemExit):
+            cli_main(["verify", "--seal", str(copy)])
+    finally:
+        session.release()
+    assert capsys.readouterr().err.endswith(
+        f"lonlib: error: {copy}: a sampling session is running; seal it once it ends\n"
+    )
+    assert not (copy / SEAL_NAME).exists()
+    cli_main(["verify", "--seal", str(copy)])
+    assert (copy / SEAL_NAME).is_file()
+
+
 def test_a_folder_that_fails_verify_is_not_sealed(small, copy):
     (copy / SEAL_NAME).unlink()
     rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
