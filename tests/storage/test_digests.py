@@ -283,7 +283,7 @@ KILLER = """
 import os, signal, sys
 from fnmatch import fnmatch
 from pathlib import Path
-import lonlib.storage.atomic as atomic, lonlib.storage.digests as digests
+import lonlib.storage.atomic as atomic, lonlib.storage._digests_format as digests
 import lonlib.storage.trials as trials
 from lonlib.config import load_config
 from lonlib.experiment.running import run_experiment
