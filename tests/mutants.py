@@ -50,7 +50,7 @@ ROLLOUT, NETS, PMATH = (
     "lonlib/task/policy.py",
     "lonlib/util/portable_math.py",
 )
-BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
+BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/_verify_replay.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
