@@ -60,6 +60,7 @@ DIGESTS_FORMAT, DIGESTS_WRITE = (
     "lonlib/storage/_digests_write.py",
 )
 DIGESTS_CHECK, TRIALS = "lonlib/storage/_digests_check.py", "lonlib/storage/trials.py"
+OUTPUTS = "lonlib/storage/outputs.py"
 SESSION = "lonlib/storage/session.py"
 JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
@@ -139,8 +140,10 @@ GUARDS = {
     POWER: ["tests/analysis/test_claims_power.py"],
     KERNELS: ["tests/task/test_compiled_rollout.py"],
     DIGESTS_FORMAT: ["tests/storage/test_digests.py"],
-    DIGESTS_WRITE: ["tests/storage/test_digests.py"],
-    DIGESTS_CHECK: ["tests/storage/test_digests.py"],
+    # the outputs of analyse and record sealed ahead: test_outputs kills them at each point
+    DIGESTS_WRITE: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
+    DIGESTS_CHECK: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
+    OUTPUTS: ["tests/storage/test_outputs.py"],
     GYM_DDPG: ["tests/ddpg/test_gymnasium_search.py"],
     TRIALS: ["tests/storage/test_digests.py"],
     SESSION: ["tests/storage/test_digests.py"],
@@ -298,6 +301,42 @@ MUTANTS = [
         "if drawn is None or drawn != now:",
         "if False:",
         "verify --seal seals stale figures as drawn from the current trials",
+    ),
+    Mutant(
+        DIGESTS_CHECK,
+        "        if name in ahead:\n            continue  # as sealed ahead (or removed so)",
+        "        if False:\n            continue",
+        "a figure put in place as sealed ahead (an analysis killed part-way) reads as tampered",
+    ),
+    Mutant(
+        DIGESTS_CHECK,
+        'if file_digest(folder / name) == (ahead or {})[name].get("sha256")',
+        "if False",
+        "a recording put in place as sealed ahead (a record killed part-way) reads as tampered",
+    ),
+    Mutant(
+        DIGESTS_WRITE,
+        "            files[name], drawn[name] = digest, inputs",
+        "            pass",
+        "the seal forgets a figure a killed analysis put in place and the next did not write",
+    ),
+    Mutant(
+        OUTPUTS,
+        "    seal_outputs_ahead(root, figures=ahead)",
+        "    pass",
+        "analyse renames its figures into place without sealing them ahead",
+    ),
+    Mutant(
+        OUTPUTS,
+        "    seal_outputs_ahead(root, recordings=ahead)",
+        "    pass",
+        "record renames its recordings into place without sealing them ahead",
+    ),
+    Mutant(
+        OUTPUTS,
+        "    ahead.update({_key(root, folder / name): None for name in gone})",
+        "    pass",
+        "a figure an analysis removes is removed without its removal sealed ahead",
     ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),

@@ -90,6 +90,33 @@ def append_trial(
     write_run(run_folder, root, entries, config)
 
 
+def _settled_figures(root: Path, figures: Mapping[str, Any]) -> dict[str, Any]:
+    """The root's ``figures`` with what it sealed ahead (``next``, :func:`seal_outputs_ahead`)
+    and the folder holds made its seal (an analysis that stopped after putting them in
+    place): each figure there as sealed ahead, with the inputs it was drawn from, and each
+    whose removal was sealed ahead and that is gone, dropped; ``next`` itself left out."""
+    out = {key: value for key, value in figures.items() if key != "next"}
+    ahead = figures_ahead(root, figures)
+    if not ahead:
+        return out
+    files = dict(out.get("files", {}))
+    drawn = {name: drawn_from(figures, name) for name in files}
+    for name, (digest, inputs) in ahead.items():
+        if digest is None:
+            files.pop(name, None)
+            drawn.pop(name, None)
+        else:
+            files[name], drawn[name] = digest, inputs
+    if not figures.get("files"):  # nothing sealed before them: their inputs are the default
+        out["inputs"] = figures["next"].get("inputs")
+    out["files"] = dict(sorted(files.items()))
+    out.pop("inputs_of", None)
+    inputs_of = {name: value for name, value in sorted(drawn.items()) if value != out.get("inputs")}
+    if inputs_of:
+        out["inputs_of"] = inputs_of
+    return out
+
+
 def _figures_seal(
     root: Path,
     inputs: str,
@@ -101,14 +128,15 @@ def _figures_seal(
     for those ``stale`` names, drawn from the inputs given there), and the files of an
     earlier analysis that are still there and were not written again, as they were sealed
     (digest and inputs; as sealed ahead where the file holds that, an analysis that stopped
-    part-way): an analysis without the conditioning keeps the conditioning's."""
+    part-way, :func:`_settled_figures`): an analysis without the conditioning keeps the
+    conditioning's."""
     files = {Path(f).relative_to(root).as_posix(): file_digest(Path(f)) for f in written}
     drawn = {name: stale[name] for name in files if name in stale}
-    old = old or {}
-    ahead = {n: v for n, v in figures_ahead(root, old).items() if v[0] is not None}
-    for name in sorted({*old.get("files", {}), *ahead}):
+    old = _settled_figures(root, old or {})
+    for name, digest in old.get("files", {}).items():
         if name not in files and (root / name).is_file():
-            files[name], recorded = ahead.get(name) or (old["files"][name], drawn_from(old, name))
+            files[name] = digest
+            recorded = drawn_from(old, name)
             if recorded != inputs:
                 drawn[name] = recorded
     entry: dict[str, Any] = {"inputs": inputs, "files": dict(sorted(files.items()))}
@@ -176,9 +204,9 @@ def write_root(
         )
     elif "figures" in old:
         seal["figures"] = old["figures"]
-    if figures_ahead is not None:
+    if figures_ahead is not None:  # what an earlier one left sealed ahead and in place, settled
         seal["figures"] = {
-            **seal.get("figures", {"files": {}}),
+            **_settled_figures(root, seal.get("figures", {"files": {}})),
             "next": {"inputs": inputs_digest(seal), "files": dict(sorted(figures_ahead.items()))},
         }
     write_seal(root / SEAL_NAME, seal)

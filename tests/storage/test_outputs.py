@@ -139,6 +139,24 @@ def test_an_analysis_killed_at_each_point_is_not_tampered_and_completes(
     assert files == expected  # what an analysis that was not killed seals
 
 
+def test_a_smaller_analysis_after_a_killed_one_seals_what_the_killed_one_put_in_place(
+    sampled, tmp_path, monkeypatch
+):
+    """Killed after its renames, an analysis with the conditioning left files sealed ahead
+    only; the next analysis, without the conditioning, does not write them again and seals
+    them as sealed ahead (with the trials they were drawn from), not as files no seal lists."""
+    out = copy_of(sampled, tmp_path)
+    kill_at(monkeypatch, "call:reseal_outputs")
+    with pytest.raises(Killed):
+        analyse(out, close_figures=True)
+    monkeypatch.undo()
+    written = analyse(out, close_figures=True, conditioning=False).files
+    assert out / "figures" / "replayed.csv" not in written
+    assert_complete(out)
+    figures = json.loads((out / SEAL_NAME).read_text())["figures"]
+    assert "figures/replayed.csv" in figures["files"] and "inputs_of" not in figures
+
+
 @pytest.mark.parametrize("earlier", [False, True], ids=["first", "again"])
 @pytest.mark.parametrize("point", RECORDING_POINTS)
 def test_a_record_killed_at_each_point_is_not_tampered_and_completes(
