@@ -434,8 +434,7 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
                 if no_frames and not paths:
                     warnings.warn(f"recordings without frames: {no_frames}", stacklevel=2)
             paths.append(path)
-        staged = list(dict.fromkeys(paths))
         # the index the folder will hold: the recordings there, those staged in their place
-        index = {**recordings_index(folder), **recordings_index(folder, files=staged)}
-        publish_recordings(folder, staged, dict(sorted(index.items())))
+        index = {**recordings_index(folder), **recordings_index(folder, files=set(paths))}
+        publish_recordings(folder, paths, dict(sorted(index.items())))
     return [folder / "recordings" / path.name for path in paths]

@@ -59,9 +59,9 @@ def publish_figures(root: Path, staged: Iterable[Path], removed: Iterable[str] =
     """Put the figures and tables ``staged`` (files of :func:`staging_folder`'s folder) in
     place in the folder above it, and remove those named ``removed`` (file names there that
     this analysis no longer makes), sealed ahead and resealed in a sealed experiment
-    ``root`` (see the module docstring): their final paths, in the order given. The 3-D
-    LON's HTML pages are put in place too, not sealed (kept out of git)."""
-    root, staged = Path(root), [Path(p) for p in staged]
+    ``root`` (see the module docstring): their final paths, in the order given (each once).
+    The 3-D LON's HTML pages are put in place too, not sealed (kept out of git)."""
+    root, staged = Path(root), list(dict.fromkeys(Path(p) for p in staged))
     folder = _target(staged)
     if folder is None:
         return []
@@ -89,8 +89,8 @@ def publish_recordings(
     ``<root>/recordings``) in place, sealed ahead and resealed in a sealed experiment
     ``root`` with ``index``, the index of every recording the folder then holds (file name →
     its trial's ``p``, ``run``, ``index``, ``fitness``; see the module docstring): their
-    final paths, in the order given."""
-    root, staged = Path(root), [Path(p) for p in staged]
+    final paths, in the order given (each once)."""
+    root, staged = Path(root), list(dict.fromkeys(Path(p) for p in staged))
     folder = _target(staged)
     if folder is None:
         return []
