@@ -103,7 +103,13 @@ def reseal(folder: Path) -> Path:
     a recording planted) as if lonlib had written it so: the old seal removed, the runs,
     the recordings and the figures sealed as they are now (:mod:`lonlib.storage.digests`)."""
     from lonlib.analysis.recordings import recordings_index
-    from lonlib.storage.digests import RUN_DIGESTS, SEAL_NAME, reseal_outputs, seal_runs
+    from lonlib.storage.digests import (
+        RUN_DIGESTS,
+        SEAL_NAME,
+        figure_files,
+        reseal_outputs,
+        seal_runs,
+    )
     from lonlib.storage.layout import read_manifest
 
     folder = Path(folder)
@@ -111,7 +117,7 @@ def reseal(folder: Path) -> Path:
     for path in folder.glob(f"p=*/run_*/{RUN_DIGESTS}"):
         path.unlink()
     seal_runs(folder, read_manifest(folder))
-    figures = sorted(p for p in (folder / "figures").glob("*") if p.is_file())
+    figures = figure_files(folder)
     reseal_outputs(folder, figures=figures, recordings=recordings_index(folder))
     return folder
 

@@ -50,12 +50,17 @@ ROLLOUT, NETS, PMATH = (
     "lonlib/task/policy.py",
     "lonlib/util/portable_math.py",
 )
-BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/verify.py"
+BEHAVIOUR, VERIFY = "lonlib/task/behaviour.py", "lonlib/analysis/_verify_replay.py"
 CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.py"
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
 GYM_DDPG = "lonlib/ddpg/gymnasium_search.py"
-DIGESTS, TRIALS = "lonlib/storage/digests.py", "lonlib/storage/trials.py"
+DIGESTS_FORMAT, DIGESTS_WRITE = (
+    "lonlib/storage/_digests_format.py",
+    "lonlib/storage/_digests_write.py",
+)
+DIGESTS_CHECK, TRIALS = "lonlib/storage/_digests_check.py", "lonlib/storage/trials.py"
+OUTPUTS = "lonlib/storage/outputs.py"
 SESSION = "lonlib/storage/session.py"
 JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
@@ -134,7 +139,11 @@ GUARDS = {
     HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
     POWER: ["tests/analysis/test_claims_power.py"],
     KERNELS: ["tests/task/test_compiled_rollout.py"],
-    DIGESTS: ["tests/storage/test_digests.py"],
+    DIGESTS_FORMAT: ["tests/storage/test_digests.py"],
+    # the outputs of analyse and record sealed ahead: test_outputs kills them at each point
+    DIGESTS_WRITE: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
+    DIGESTS_CHECK: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
+    OUTPUTS: ["tests/storage/test_outputs.py"],
     GYM_DDPG: ["tests/ddpg/test_gymnasium_search.py"],
     TRIALS: ["tests/storage/test_digests.py"],
     SESSION: ["tests/storage/test_digests.py"],
@@ -143,50 +152,50 @@ GUARDS = {
 MUTANTS = [
     # --- digests: each line below is what makes one kind of change visible
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         'if len(entries) < count or entries[count - 1]["chain"] != run.sealed["head"]:',
         "if len(entries) < count:",
         "the root's chain head is not compared (a run rewritten to its count passes)",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "    if len(rows) > len(entries):",
         "    if False:",
         "a row appended by hand is not named",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "if len(rows) < count:",
         "if False:",
         "a run's last rows and files removed under kept digests read as sealed ahead (resume "
         "re-samples them)",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         'check.problems.append((f"{run.key}/{name}", "a sealed file is missing"))',
         "pass",
         "a deleted history or optimum is not named (histories are not replayed)",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         'check.problems.append((f"{run.key}/{path.name}", "a file no seal lists"))',
         "pass",
         "an extra file no seal lists in a run's folder is not named",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "elif file_digest(path) not in accepted:",
         "elif False:",
         "a changed optimum or history passes",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         'if config_digest(manifest) not in (seal.get("config"), seal.get("config_next")):',
         "if False:",
         "an edited setting passes",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         'if file_digest(folder / name) != listed[name].get("sha256"):',
         "if False:",
         "a changed recording passes",
@@ -198,7 +207,7 @@ MUTANTS = [
         "the incumbent on resume takes the optimum file's copy of f*",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_WRITE,
         'seal["config_next"] = config_digest(next_manifest)',
         "pass",
         "a changed setting is not sealed ahead of its manifest (config_next)",
@@ -210,7 +219,7 @@ MUTANTS = [
         "a session does not seal the root ahead of its manifest",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "    elif manifest.get(SEALED_FIELD) is True:",
         "    elif False:",
         "a folder that lost its seal and every digest reads as unsealed",
@@ -222,31 +231,31 @@ MUTANTS = [
         "a new experiment's manifest does not record its seal",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_WRITE,
         "    write_root(root, manifest)\n    mark_sealed(root)",
         "    write_root(root, manifest)",
         "verify --seal does not record the seal in the manifest",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "if run.chains is not None and config != run.chains:",
         "if False:",
         "a run chained from another configuration passes",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_FORMAT,
         'return bytes_digest(f"lonlib run {key} config {config}".encode())',
         'return bytes_digest(f"lonlib run {key}".encode())',
         "a run's chain starts from its name alone, not its configuration",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_WRITE,
         'seal["chain_config"] = chains',
         "pass",
         "the root forgets the chains' configuration",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "        elif file_digest(path) != digest:\n"
         "            check.problems.append(\n"
         '                (name, "differs from its seal (a figure: `lonlib analyse` '
@@ -256,7 +265,7 @@ MUTANTS = [
         "a changed figure passes",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "        if not path.is_file():\n            check.problems.append(\n"
         '                (name, "a sealed figure',
         "        if False:\n            check.problems.append(\n"
@@ -264,34 +273,70 @@ MUTANTS = [
         "a missing figure passes",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_CHECK,
         "        if name not in listed:",
         "        if False:",
         "a figure the seal does not list passes",
     ),
     Mutant(
-        DIGESTS,
-        "stale = [name for name in sorted(listed) if _drawn_from(figures, name) != now]",
+        DIGESTS_CHECK,
+        "stale = [name for name in sorted(drawn) if drawn[name] != now]",
         "stale: list[str] = []",
         "stale figures are not reported",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_WRITE,
         "if name not in files and (root / name).is_file():",
         "if False:",
         "an analysis without the conditioning drops the earlier figures from the seal",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_WRITE,
         "            if recorded != inputs:\n                drawn[name] = recorded",
         "            pass",
         "figures kept from an earlier analysis are sealed as drawn from the current trials",
     ),
     Mutant(
-        DIGESTS,
+        DIGESTS_WRITE,
         "if drawn is None or drawn != now:",
         "if False:",
         "verify --seal seals stale figures as drawn from the current trials",
+    ),
+    Mutant(
+        DIGESTS_CHECK,
+        "        if name in ahead:\n            continue  # as sealed ahead (or removed so)",
+        "        if False:\n            continue",
+        "a figure put in place as sealed ahead (an analysis killed part-way) reads as tampered",
+    ),
+    Mutant(
+        DIGESTS_CHECK,
+        'if file_digest(folder / name) == (ahead or {})[name].get("sha256")',
+        "if False",
+        "a recording put in place as sealed ahead (a record killed part-way) reads as tampered",
+    ),
+    Mutant(
+        DIGESTS_WRITE,
+        "            files[name], drawn[name] = digest, inputs",
+        "            pass",
+        "the seal forgets a figure a killed analysis put in place and the next did not write",
+    ),
+    Mutant(
+        OUTPUTS,
+        "    seal_outputs_ahead(root, figures=ahead)",
+        "    pass",
+        "analyse renames its figures into place without sealing them ahead",
+    ),
+    Mutant(
+        OUTPUTS,
+        "    seal_outputs_ahead(root, recordings=ahead)",
+        "    pass",
+        "record renames its recordings into place without sealing them ahead",
+    ),
+    Mutant(
+        OUTPUTS,
+        "    ahead.update({_key(root, folder / name): None for name in gone})",
+        "    pass",
+        "a figure an analysis removes is removed without its removal sealed ahead",
     ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),

@@ -2,7 +2,9 @@
 
 The notebooks call these functions; ``make reproduce`` runs the notebooks. Outputs go to
 ``<experiment>/figures/`` and ``<experiment>/recordings/`` (never overwriting anything but
-the figures and tables derived here).
+the figures and tables derived here), each written under a temporary name, sealed ahead, then
+renamed into place (:mod:`lonlib.storage.outputs`): a kill never leaves a folder that reads
+as tampered, and the same command again completes it.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from lonlib.analysis.claims import (
 )
 from lonlib.analysis.claims_power import power_table
 from lonlib.analysis.claims_report import write_claims
+from lonlib.analysis.claims_rescored import FILES as ROBUST_CLAIMS_FILES
 from lonlib.analysis.claims_rescored import write_robust_claims
 from lonlib.analysis.conditioning import (
     conditioning_by_label,
@@ -58,8 +61,9 @@ from lonlib.config import ExperimentConfig
 from lonlib.lon.behaviour import behaviour_table, behavioural_lon
 from lonlib.lon.graphs import build_lon, node_id, sinks
 from lonlib.lon.metrics import lon_metrics
-from lonlib.storage.digests import check_experiment_seal, is_sealed, reseal_outputs
+from lonlib.storage.digests import check_experiment_seal, is_sealed
 from lonlib.storage.layout import optimum_path, read_manifest, stored_config
+from lonlib.storage.outputs import publish_figures, publish_recordings, staging_folder
 from lonlib.storage.trials import read_finished_trials, read_optimum
 from lonlib.task.behaviour import descriptors_of
 from lonlib.task.interface import task_of
@@ -120,7 +124,8 @@ def analyse(
     their cost, ``power.csv``: :mod:`lonlib.analysis.claims_power`), the
     experiment's summary per p (``summary.csv``: :mod:`lonlib.analysis.summary`), and a
     sensitivity view when more than two p values are present. Reads the stored runs and
-    writes only under ``<folder>/figures/``.
+    writes only under ``<folder>/figures/``: every file under a temporary name first, then
+    sealed ahead and renamed into place (:func:`lonlib.storage.outputs.publish_figures`).
 
     ``close_figures`` closes each matplotlib figure once saved (it stays in the result and
     can still be displayed), so a notebook's inline backend does not show every figure at
@@ -135,11 +140,26 @@ def analyse(
     once, for the figures, the claims and the conditioning."""
     if not isinstance(experiment, StoredExperiment):
         experiment = StoredExperiment.load(experiment, fitness_tolerance)
+    with staging_folder(experiment.folder / "figures") as out:  # every file here first
+        result, removed = _draw(experiment, out, seed, bins, close_figures, conditioning)
+        result.files = publish_figures(experiment.folder, result.files, removed)
+    return result
+
+
+def _draw(
+    experiment: StoredExperiment,
+    out: Path,
+    seed: int,
+    bins: int,
+    close_figures: bool,
+    conditioning: bool,
+) -> tuple[Analysis, list[str]]:
+    """What :func:`analyse` writes, written into ``out`` (its staging folder): the analysis
+    and the names of the files an earlier analysis left that this one no longer makes."""
     folder, trials = experiment.folder, experiment.trials
     fitness_tolerance = experiment.fitness_tolerance
-    out = folder / "figures"
-    out.mkdir(parents=True, exist_ok=True)
     result = Analysis(metrics=pd.DataFrame(), peaks=pd.DataFrame())
+    removed: list[str] = []
 
     def save(name: str, fig: plt.Figure) -> None:
         path = save_png(fig, out / f"{name}.png")
@@ -201,8 +221,7 @@ def analyse(
         table.to_csv(path, index=False)
         result.files.append(path)
     if not pendulums:
-        reseal_outputs(folder, figures=result.files)
-        return result
+        return result, removed
     result.claims = claims_of_landscapes(experiment.landscapes, bins)
     result.claim_peaks = peaks_of_landscapes(experiment.landscapes, bins)
     result.claim_d_curve = claim_d_curve(trials)
@@ -218,9 +237,8 @@ def analyse(
     if trials["p"].nunique() > 2:
         save("sensitivity", sensitivity(result.metrics))
     if conditioning:
-        _conditioning(experiment, result, save, out, bins)
-    reseal_outputs(folder, figures=result.files)
-    return result
+        _conditioning(experiment, result, save, out, bins, removed)
+    return result, removed
 
 
 GENERIC_TASK_SKIPS = (
@@ -235,11 +253,13 @@ def _conditioning(
     save: Callable[[str, plt.Figure], None],
     out: Path,
     bins: int,
+    removed: list[str],
 ) -> None:
     """The nodes' conditioning (:mod:`lonlib.analysis.conditioning`): every stored Actor replayed
     (``replayed.csv``), nominal beside robust Figs. 4-5, the retention curve and the table
     per behaviour label; edges a re-scoring would make deteriorating; the optima that hold
-    their rods."""
+    their rods. ``removed`` gets the names of the files an earlier analysis left that this
+    one does not make (the robust claims, when the re-scoring is refused)."""
     folder, config, trials = experiment.folder, experiment.config, experiment.trials
     fitness_tolerance = experiment.fitness_tolerance
     replayed = replay_optima(folder, trials, config.env, config.ddpg.scoring)
@@ -249,6 +269,8 @@ def _conditioning(
         trials, replayed, result.claims, out, bins, fitness_tolerance
     )
     result.files += files
+    if not files:  # refused: no stale robust claims stay
+        removed.extend(ROBUST_CLAIMS_FILES)
     described = set(needed_columns(config.env.n_carts)) <= set(trials.columns)
     result.holding = (  # empty without stored Actors or behaviour descriptors
         holding_table(folder, trials, config.env, config.ddpg.scoring)
@@ -396,29 +418,33 @@ def record_optima(folder: str | Path, bins: int = 50, limit: int = 24) -> list[P
         selection = selection.head(limit)
     if is_sealed(folder):  # what the index will list must be what it listed, before any compute
         check = check_experiment_seal(folder, read_manifest(folder), figures=False)
-        # a recording this command rewrites is regenerated (a `record` killed after it rewrote
-        # one, before the reseal); every other difference, data or recording, stops it
+        # a recording this command rewrites is regenerated (one that an older lonlib's
+        # `record`, killed after it rewrote it in place, left unsealed); every other
+        # difference, data or recording, stops it
         ours = {f"recordings/{_recording_name(r)}" for r in selection.itertuples()}
         check.problems = [(name, what) for name, what in check.problems if name not in ours]
         check.raise_if_tampered("lonlib record")
-    paths = []
-    task = None if config.task is None else task_of(config)
-    for row in selection.itertuples():
-        optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
-        path = folder / "recordings" / _recording_name(row)
-        title = f"{row.role} p={p_label(row.p)}"
-        properties: dict[str, float | int | str] = {
-            "p": float(row.p),
-            "run": int(row.run),
-            "index": int(row.index),
-            "stored_fitness": float(row.fitness),
-        }
-        if task is None:
-            record(optimum.theta, config.env, path, title, config.ddpg.scoring, properties)
-        else:
-            _, no_frames = record_task(task, optimum.theta, path, title, properties)
-            if no_frames and not paths:
-                warnings.warn(f"recordings without frames: {no_frames}", stacklevel=2)
-        paths.append(path)
-    reseal_outputs(folder, recordings=recordings_index(folder))
-    return paths
+    with staging_folder(folder / "recordings") as staging:  # each recording here first
+        paths: list[Path] = []
+        task = None if config.task is None else task_of(config)
+        for row in selection.itertuples():
+            optimum = read_optimum(optimum_path(folder, row.p, int(row.run), int(row.index)))
+            path = staging / _recording_name(row)
+            title = f"{row.role} p={p_label(row.p)}"
+            properties: dict[str, float | int | str] = {
+                "p": float(row.p),
+                "run": int(row.run),
+                "index": int(row.index),
+                "stored_fitness": float(row.fitness),
+            }
+            if task is None:
+                record(optimum.theta, config.env, path, title, config.ddpg.scoring, properties)
+            else:
+                _, no_frames = record_task(task, optimum.theta, path, title, properties)
+                if no_frames and not paths:
+                    warnings.warn(f"recordings without frames: {no_frames}", stacklevel=2)
+            paths.append(path)
+        # the index the folder will hold: the recordings there, those staged in their place
+        index = {**recordings_index(folder), **recordings_index(folder, files=set(paths))}
+        publish_recordings(folder, paths, dict(sorted(index.items())))
+    return [folder / "recordings" / path.name for path in paths]

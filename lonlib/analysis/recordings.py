@@ -23,6 +23,7 @@ import io
 import os
 import re
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -282,12 +283,17 @@ def recording_properties(path: str | Path) -> dict[str, float | int | str]:
     return {}
 
 
-def recordings_index(folder: str | Path) -> dict[str, dict[str, float | int | None]]:
+def recordings_index(
+    folder: str | Path, files: Iterable[Path] | None = None
+) -> dict[str, dict[str, float | int | None]]:
     """Every recording of an experiment folder (``recordings/*.rrd``) with the trial it shows
     (``p``, ``run``, ``index``) and that trial's stored fitness, read from its ``optimum``
-    property: the index the folder's seal keeps (:mod:`lonlib.storage.digests`)."""
+    property: the index the folder's seal keeps (:mod:`lonlib.storage.digests`). ``files``:
+    those recordings instead (written under a temporary name before they are put in place,
+    :mod:`lonlib.storage.outputs`), by file name."""
     index = {}
-    for path in sorted((Path(folder) / "recordings").glob("*.rrd")):
+    chosen = (Path(folder) / "recordings").glob("*.rrd") if files is None else files
+    for path in sorted(Path(p) for p in chosen):
         props = recording_properties(path)
         index[path.name] = {
             "p": props.get("p"),

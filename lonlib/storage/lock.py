@@ -103,6 +103,28 @@ class SamplingLock:
             self._handle = None
 
 
+@contextmanager
+def sampling_lock_or_refuse(folder: Path, command: str) -> Iterator[None]:
+    """Hold the experiment folder's sampling lock (:class:`SamplingLock`) exclusively for the
+    ``with`` block, for a command that rewrites what sampling sessions append to (``lonlib
+    thin``, ``lonlib verify --seal``): a session that starts meanwhile waits for it. If a
+    session is sampling, refuse without waiting: ValueError "<folder>: a sampling session is
+    running; <command> it once it ends" (``command``: ``"thin"``, ``"seal"``)."""
+    from lonlib.storage.layout import SAMPLING_LOCK
+
+    sampling = SamplingLock(Path(folder) / SAMPLING_LOCK)
+    try:
+        sampling.acquire(exclusive=True)
+    except LockHeld:
+        raise ValueError(
+            f"{folder}: a sampling session is running; {command} it once it ends"
+        ) from None
+    try:
+        yield
+    finally:
+        sampling.release()
+
+
 def lock_holder(path: Path) -> str:
     """Who holds (or last held) the lock at ``path``, in words."""
     try:

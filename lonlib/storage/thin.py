@@ -31,8 +31,8 @@ from lonlib.storage.digests import (
     seal_ahead,
     settle_ahead,
 )
-from lonlib.storage.layout import MANIFEST_LOCK, SAMPLING_LOCK, read_manifest
-from lonlib.storage.lock import LockHeld, SamplingLock, exclusive_lock
+from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
+from lonlib.storage.lock import exclusive_lock, sampling_lock_or_refuse
 
 HISTORY_GLOB = "p=*/run_*/history_*.parquet"
 """Where an experiment folder keeps its training histories (:mod:`lonlib.storage.layout`)."""
@@ -130,12 +130,7 @@ def _rewrite(root: Path, plans: list[tuple[Path, bytes]]) -> None:
     """Rewrite the histories, with no sampling session on the folder (it appends to the runs'
     digests that a reseal rewrites); in a sealed folder their new digests are sealed ahead
     (a kill part-way leaves each history accepted as old or new), then made the seal."""
-    sampling = SamplingLock(root / SAMPLING_LOCK)
-    try:
-        sampling.acquire(exclusive=True)
-    except LockHeld:
-        raise ValueError(f"{root}: a sampling session is running; thin it once it ends") from None
-    try:
+    with sampling_lock_or_refuse(root, "thin"):
         sealed = is_sealed(root)
         if sealed:
             seal_ahead(root, {path: bytes_digest(data) for path, data in plans})
@@ -146,8 +141,6 @@ def _rewrite(root: Path, plans: list[tuple[Path, bytes]]) -> None:
                 settle_ahead(run, root)
             with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
                 reseal_files(root, read_manifest(root), [path for path, _ in plans])
-    finally:
-        sampling.release()
 
 
 __all__ = ["HISTORY_GLOB", "ThinReport", "thin_histories", "thinned_history"]

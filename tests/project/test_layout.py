@@ -1,7 +1,7 @@
 """The package layout's rule, guarded here rather than only by lint: lonlib's subpackages import
 one way (import-linter's contracts in pyproject.toml, imports inside functions included), the
-analysis side never loads torch, no module is part of an import cycle, and no private name is
-imported from another module."""
+analysis side never loads torch, no module is part of an import cycle, no private name is
+imported from another module, and no module is longer than a reader can hold (700 lines)."""
 
 import ast
 import importlib
@@ -69,6 +69,20 @@ def private_imports() -> list[str]:
 
 def test_no_private_name_is_imported_across_modules():
     assert private_imports() == []
+
+
+MOST_LINES = 700
+"""The longest a module of lonlib may be: a longer one is split by job into modules of its
+subpackage (private ``_name.py`` ones where its public names stay importable from it)."""
+
+
+def test_no_module_is_over_700_lines():
+    lines = {
+        path.relative_to(REPO).as_posix(): len(path.read_text().splitlines())
+        for path in sorted(PACKAGE.rglob("*.py"))
+    }
+    assert lines, "no module found"
+    assert {path: n for path, n in lines.items() if n > MOST_LINES} == {}
 
 
 @pytest.mark.parametrize("name", SUBPACKAGES)

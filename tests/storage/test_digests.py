@@ -230,6 +230,28 @@ def test_an_unsealed_folder_is_warned_about_then_sealed_by_verify(small, copy, c
         load_experiment(copy)
 
 
+def test_sealing_refuses_a_folder_a_session_is_sampling(small, copy, capsys):
+    """``verify --seal`` rewrites the runs' digests that a session appends to: while a session
+    holds the sampling lock (shared) it refuses in one line and seals nothing."""
+    from lonlib.storage.layout import SAMPLING_LOCK
+    from lonlib.storage.lock import SamplingLock
+
+    unseal(copy)
+    session = SamplingLock(copy / SAMPLING_LOCK)
+    session.acquire(exclusive=False)
+    try:
+        with pytest.raises(SystemExit):
+            cli_main(["verify", "--seal", str(copy)])
+    finally:
+        session.release()
+    assert capsys.readouterr().err.endswith(
+        f"lonlib: error: {copy}: a sampling session is running; seal it once it ends\n"
+    )
+    assert not (copy / SEAL_NAME).exists()
+    cli_main(["verify", "--seal", str(copy)])
+    assert (copy / SEAL_NAME).is_file()
+
+
 def test_a_folder_that_fails_verify_is_not_sealed(small, copy):
     (copy / SEAL_NAME).unlink()
     rewrite_table(copy, 0, TABLE_EDITS["fitness + 1e-6"])
@@ -261,7 +283,7 @@ KILLER = """
 import os, signal, sys
 from fnmatch import fnmatch
 from pathlib import Path
-import lonlib.storage.atomic as atomic, lonlib.storage.digests as digests
+import lonlib.storage.atomic as atomic, lonlib.storage._digests_format as digests
 import lonlib.storage.trials as trials
 from lonlib.config import load_config
 from lonlib.experiment.running import run_experiment
@@ -812,9 +834,9 @@ def test_sealing_refuses_mismatches_reported_as_warnings(small, copy, capsys):
 
 
 def test_a_record_killed_before_its_reseal_is_repaired_by_recording_again(small, copy):
-    """``record`` rewrote a recording, then was killed before resealing it: verify says
-    `lonlib record` regenerates it, and recording again does (its own output); a recording
-    it would not write stays a refusal."""
+    """``record`` rewrote a recording in place (as an older lonlib did), then was killed before
+    resealing it: verify says `lonlib record` regenerates it, and recording again does (its
+    own output); a recording it would not write stays a refusal."""
     from lonlib.analysis.pipeline import record_optima
 
     (path,) = record_optima(copy, limit=1)

@@ -13,6 +13,8 @@ from lonlib.analysis.verify import verify_experiment
 from lonlib.cli import main
 from lonlib.storage import thin_histories
 from lonlib.storage.atomic import MissingExperimentError
+from lonlib.storage.layout import SAMPLING_LOCK
+from lonlib.storage.lock import SamplingLock
 from lonlib.storage.thin import HISTORY_GLOB, thinned_history
 from tests.conftest import reseal
 
@@ -110,3 +112,32 @@ def test_thin_refuses_a_folder_without_an_experiment(tmp_path, capsys):
         thin_histories(tmp_path)
     with pytest.raises(SystemExit):
         main(["thin", str(tmp_path / "nothing")])
+
+
+def test_thin_refuses_a_folder_a_session_is_sampling_and_thins_it_once_it_ended(
+    tiny_experiment, tmp_path, capsys
+):
+    """Thin rewrites the runs' digests that a session appends to: while a session holds the
+    sampling lock (shared) it refuses in one line and changes nothing."""
+    _, folder, _ = tiny_experiment
+    root = tmp_path / "exp"
+    shutil.copytree(folder, root)
+    path = sorted(root.glob(HISTORY_GLOB))[0]
+    history = pd.read_parquet(path)
+    history.loc[history.index[0], "greedy_fitness"] = np.nan
+    history.to_parquet(path, index=False)
+    reseal(root)
+    session = SamplingLock(root / SAMPLING_LOCK)
+    session.acquire(exclusive=False)
+    before = _files(root)
+    try:
+        with pytest.raises(SystemExit):
+            main(["thin", str(root)])
+    finally:
+        session.release()
+    assert capsys.readouterr().err == (
+        f"lonlib: error: {root}: a sampling session is running; thin it once it ends\n"
+    )
+    assert _files(root) == before
+    main(["thin", str(root)])
+    assert len(pd.read_parquet(path)) == len(history) - 1

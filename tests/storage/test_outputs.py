@@ -1,0 +1,266 @@
+"""Outputs put in place (:mod:`lonlib.storage.outputs`): ``lonlib analyse`` and ``lonlib record``
+write each file under a temporary name, seal their digests ahead, then rename them into place
+and reseal, so that a kill at any point leaves a folder that ``lonlib verify`` does not
+report as tampered (at most pending), and the same command again completes it."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from fnmatch import fnmatch
+from pathlib import Path
+
+import pytest
+
+import lonlib.storage.outputs as outputs
+from lonlib.analysis.pipeline import analyse, load_experiment, record_optima
+from lonlib.analysis.verify import verify_experiment
+from lonlib.cli import main as cli_main
+from lonlib.storage.digests import SEAL_NAME, check_experiment_seal
+from lonlib.storage.layout import read_manifest
+from lonlib.storage.outputs import STAGING, publish_figures, staging_folder
+from tests.conftest import sample_small
+
+ROOT = Path(__file__).resolve().parents[2]
+P = 1e-3
+EARLIER = {"bins": 20, "seed": 1, "conditioning": False}
+"""An earlier analysis: other bins and layout (other figures), without the conditioning (the
+analysis under test adds its files)."""
+RECORDINGS = 2
+
+# Where a kill strikes: "call:<f>" on entering lonlib.storage.outputs' <f>, else
+# "<file name pattern>#<n>" after the n-th rename onto a matching name (os.replace: the
+# outputs' renames and every atomic write, the seal's included).
+FIGURE_POINTS = [
+    "call:seal_outputs_ahead",  # every output written under a temporary name, nothing sealed
+    "seal.json#1",  # sealed ahead, nothing renamed
+    "fig2_optima_boxplot.png#1",  # the first figure renamed, the others not
+    "summary.csv#1",  # part-way
+    "call:reseal_outputs",  # every figure renamed, the reseal not written
+    "seal.json#2",  # resealed, the temporary folder not yet removed
+]
+RECORDING_POINTS = [
+    "call:seal_outputs_ahead",
+    "seal.json#1",
+    "*.rrd#1",
+    "call:reseal_outputs",
+    "seal.json#2",
+]
+
+
+class Killed(BaseException):
+    """A kill simulated in the process: nothing in lonlib catches it."""
+
+
+def kill_at(monkeypatch, point: str, kill=None) -> None:
+    """Make ``point`` (see :data:`FIGURE_POINTS`) raise :class:`Killed` (or call ``kill``)."""
+
+    def die(*args, **kwargs):
+        if kill is not None:
+            kill()
+        raise Killed(point)
+
+    if point.startswith("call:"):
+        monkeypatch.setattr(outputs, point.removeprefix("call:"), die)
+        return
+    pattern, count = point.split("#")
+    original, seen = os.replace, [0]
+
+    def replace_then_maybe_die(src, dst, *args, **kwargs):
+        original(src, dst, *args, **kwargs)
+        if fnmatch(Path(dst).name, pattern):
+            seen[0] += 1
+            if seen[0] == int(count):
+                die()
+
+    monkeypatch.setattr(os, "replace", replace_then_maybe_die)
+
+
+@pytest.fixture(scope="module")
+def sampled(tmp_path_factory):
+    """One p, two runs of two 60-step searches, sealed: the output folder."""
+    return sample_small(tmp_path_factory.mktemp("outputs"), P, 2, "outputs")[2]
+
+
+@pytest.fixture(scope="module")
+def expected(sampled, tmp_path_factory):
+    """``sampled`` analysed without interruption (after :data:`EARLIER`): its sealed
+    figures."""
+    out = tmp_path_factory.mktemp("expected") / "out"
+    shutil.copytree(sampled, out)
+    analyse(out, close_figures=True, **EARLIER)
+    analyse(out, close_figures=True)
+    return json.loads((out / SEAL_NAME).read_text())["figures"]["files"]
+
+
+def copy_of(sampled: Path, tmp_path: Path) -> Path:
+    shutil.copytree(sampled, tmp_path / "out")
+    return tmp_path / "out"
+
+
+def assert_not_tampered(out: Path) -> list[tuple[str, str]]:
+    """The folder reads as pending at most: its seal check and ``lonlib verify`` find no
+    error, its readers read it. Returns what is pending."""
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.sealed and check.ok, check.problems
+    assert verify_experiment(out).errors == []
+    load_experiment(out)  # a reader's gate
+    return check.pending
+
+
+def assert_complete(out: Path) -> None:
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+    seal = json.loads((out / SEAL_NAME).read_text())
+    assert "next" not in seal.get("figures", {}) and "recordings_next" not in seal
+    assert not list(out.glob(f"*/{STAGING}"))
+
+
+@pytest.mark.parametrize("earlier", [False, True], ids=["first", "again"])
+@pytest.mark.parametrize("point", FIGURE_POINTS)
+def test_an_analysis_killed_at_each_point_is_not_tampered_and_completes(
+    sampled, expected, tmp_path, monkeypatch, point, earlier
+):
+    out = copy_of(sampled, tmp_path)
+    if earlier:
+        analyse(out, close_figures=True, **EARLIER)
+    kill_at(monkeypatch, point)
+    with pytest.raises(Killed):
+        analyse(out, close_figures=True)
+    monkeypatch.undo()
+    pending = assert_not_tampered(out)
+    ahead = [what for name, what in pending if name == SEAL_NAME]
+    assert bool(ahead) == (point not in ("call:seal_outputs_ahead", "seal.json#2")), pending
+    analyse(out, close_figures=True)
+    assert_complete(out)
+    files = json.loads((out / SEAL_NAME).read_text())["figures"]["files"]
+    assert files == expected  # what an analysis that was not killed seals
+
+
+def test_a_smaller_analysis_after_a_killed_one_seals_what_the_killed_one_put_in_place(
+    sampled, tmp_path, monkeypatch
+):
+    """Killed after its renames, an analysis with the conditioning left files sealed ahead
+    only; the next analysis, without the conditioning, does not write them again and seals
+    them as sealed ahead (with the trials they were drawn from), not as files no seal lists."""
+    out = copy_of(sampled, tmp_path)
+    kill_at(monkeypatch, "call:reseal_outputs")
+    with pytest.raises(Killed):
+        analyse(out, close_figures=True)
+    monkeypatch.undo()
+    written = analyse(out, close_figures=True, conditioning=False).files
+    assert out / "figures" / "replayed.csv" not in written
+    assert_complete(out)
+    figures = json.loads((out / SEAL_NAME).read_text())["figures"]
+    assert "figures/replayed.csv" in figures["files"] and "inputs_of" not in figures
+
+
+@pytest.mark.parametrize("earlier", [False, True], ids=["first", "again"])
+@pytest.mark.parametrize("point", RECORDING_POINTS)
+def test_a_record_killed_at_each_point_is_not_tampered_and_completes(
+    sampled, tmp_path, monkeypatch, point, earlier
+):
+    """A first recording of the folder (no recordings index in its seal) and a second one
+    (every recording rewritten, with other bytes)."""
+    out = copy_of(sampled, tmp_path)
+    if earlier:
+        assert len(record_optima(out, limit=RECORDINGS)) == RECORDINGS
+    before = {p.name: p.read_bytes() for p in (out / "recordings").glob("*.rrd")}
+    kill_at(monkeypatch, point)
+    with pytest.raises(Killed):
+        record_optima(out, limit=RECORDINGS)
+    monkeypatch.undo()
+    pending = assert_not_tampered(out)
+    ahead = [what for name, what in pending if name == SEAL_NAME]
+    assert bool(ahead) == (point not in ("call:seal_outputs_ahead", "seal.json#2")), pending
+    if point == "call:seal_outputs_ahead":  # nothing put in place yet
+        assert {p.name: p.read_bytes() for p in (out / "recordings").glob("*.rrd")} == before
+    paths = record_optima(out, limit=RECORDINGS)
+    assert_complete(out)
+    index = json.loads((out / SEAL_NAME).read_text())["recordings"]
+    assert sorted(index) == sorted(p.name for p in paths)
+    assert verify_experiment(out).recordings == RECORDINGS
+
+
+KILLER = """
+import os, signal, sys
+from pathlib import Path
+
+import pytest
+
+from lonlib.analysis.pipeline import analyse, record_optima
+from tests.storage.test_outputs import RECORDINGS, kill_at
+
+command, out, point = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
+with pytest.MonkeyPatch.context() as monkeypatch:
+    kill_at(monkeypatch, point, kill=lambda: os.kill(os.getpid(), signal.SIGKILL))
+    if command == "analyse":
+        analyse(out, close_figures=True)
+    else:
+        record_optima(out, limit=RECORDINGS)
+"""
+
+
+@pytest.mark.parametrize(
+    "command, point", [("analyse", "fig2_optima_boxplot.png#1"), ("record", "*.rrd#1")]
+)
+def test_a_sigkill_part_way_verifies_and_the_same_command_completes(
+    sampled, tmp_path, command, point, capsys
+):
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True, **EARLIER)
+    record_optima(out, limit=RECORDINGS)
+    script = tmp_path / "killer.py"
+    script.write_text(KILLER)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(
+        [sys.executable, str(script), command, str(out), point],
+        env=env,
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == -signal.SIGKILL, done.stderr[-2000:]
+    cli_main(["verify", str(out)])  # exit status 0: no error
+    assert "verify: OK" in capsys.readouterr().out
+    cli_main([command, str(out)] + (["--limit", str(RECORDINGS)] if command == "record" else []))
+    assert_complete(out)
+
+
+@pytest.mark.parametrize("point", ["seal.json#1", "call:reseal_outputs"])
+def test_a_figure_removed_sealed_ahead_is_not_missing(sampled, tmp_path, monkeypatch, point):
+    """A file an analysis no longer makes (the robust claims, when the re-scoring is refused)
+    is removed after its removal is sealed ahead: gone before the reseal, it is not a
+    missing figure."""
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True)
+    assert (out / "figures" / "claims_robust.csv").is_file()
+    kill_at(monkeypatch, point)
+    with pytest.raises(Killed), staging_folder(out / "figures") as staging:
+        (staging / "metrics.csv").write_text("p\n0.001\n")
+        publish_figures(out, [staging / "metrics.csv"], removed=["claims_robust.csv"])
+    monkeypatch.undo()
+    assert_not_tampered(out)
+    assert (out / "figures" / "claims_robust.csv").exists() == (point == "seal.json#1")
+    with staging_folder(out / "figures") as staging:
+        (staging / "metrics.csv").write_text("p\n0.001\n")
+        publish_figures(out, [staging / "metrics.csv"], removed=["claims_robust.csv"])
+    assert not (out / "figures" / "claims_robust.csv").exists()
+    assert_complete(out)
+
+
+def test_an_unsealed_folder_gets_its_outputs_renamed_and_no_seal(sampled, tmp_path):
+    out = copy_of(sampled, tmp_path)
+    (out / SEAL_NAME).unlink()
+    for path in out.glob("p=*/run_*/digests.json"):
+        path.unlink()
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest.pop("sealed", None)
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.warns(UserWarning, match="unsealed"):
+        result = analyse(out, close_figures=True, conditioning=False)
+    assert all(path.parent == out / "figures" and path.is_file() for path in result.files)
+    assert not (out / SEAL_NAME).exists() and not (out / "figures" / STAGING).exists()
