@@ -55,6 +55,7 @@ CONFIGS, CHECKPOINTS = "lonlib/config/ddpg.py", "lonlib/experiment/checkpoints.p
 DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
 GYM_DDPG = "lonlib/ddpg/gymnasium_search.py"
+GYM_BEHAVIOUR = "lonlib/task/gymnasium_behaviour.py"
 DIGESTS_FORMAT, DIGESTS_WRITE = (
     "lonlib/storage/_digests_format.py",
     "lonlib/storage/_digests_write.py",
@@ -134,7 +135,7 @@ GUARDS = {
         *ONE_ROLLOUT,
         "tests/calibration/test_calibration.py",
     ],
-    VERIFY: ["tests/analysis/test_verify.py"],
+    VERIFY: ["tests/analysis/test_verify.py", "tests/experiment/test_gymnasium_runs.py"],
     JUDGED_LOG: ["tests/calibration/test_study.py"],
     HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
     POWER: ["tests/analysis/test_claims_power.py"],
@@ -145,6 +146,10 @@ GUARDS = {
     DIGESTS_CHECK: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
     OUTPUTS: ["tests/storage/test_outputs.py"],
     GYM_DDPG: ["tests/ddpg/test_gymnasium_search.py"],
+    GYM_BEHAVIOUR: [
+        "tests/task/test_gymnasium_behaviour.py",
+        "tests/experiment/test_gymnasium_runs.py",
+    ],
     TRIALS: ["tests/storage/test_digests.py"],
     SESSION: ["tests/storage/test_digests.py"],
 }
@@ -1180,6 +1185,31 @@ MUTANTS = [
         "SlotEnvironmentError(str(error), search.tag if search else None)",
         "SlotEnvironmentError(str(error), None)",
         "Gymnasium DDPG: a failing environment is not traced to its search",
+    ),
+    Mutant(
+        VERIFY,
+        "report.findings.extend(_check_task_descriptor(task, row, theta, severity, differs))",
+        "report.findings.extend([])",
+        "verify: a Gymnasium task's stored behaviour is not replayed",
+    ),
+    Mutant(
+        VERIFY,
+        'if (stored.get(name) != value if name == "label" else differs(stored.get(name), value))',
+        'if (False if name == "label" else differs(stored.get(name), value))',
+        "verify: a Gymnasium task's stored label is not compared",
+    ),
+    Mutant(
+        GYM_BEHAVIOUR,
+        "        self.observations.append(np.array(observation, dtype=np.float64))\n"
+        "        return observation, info",
+        "        return observation, info",
+        "Gymnasium descriptor: the trace misses the observation after reset",
+    ),
+    Mutant(
+        GYM_BEHAVIOUR,
+        "        if not isinstance(number, (int, float)) or not math.isfinite(float(number)):",
+        "        if not isinstance(number, (int, float)):",
+        "Gymnasium descriptor: a NaN value is stored",
     ),
 ]
 

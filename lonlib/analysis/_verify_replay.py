@@ -5,8 +5,9 @@ recording, and a Gymnasium task's trials; exact comparisons (NaN equal to NaN)."
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -17,6 +18,7 @@ from lonlib.storage.atomic import CorruptDataError
 from lonlib.storage.layout import optimum_path, read_manifest
 from lonlib.storage.trials import read_optimum
 from lonlib.task.behaviour import PREFIX, BehaviourDescriptor, label
+from lonlib.task.gymnasium_behaviour import describe_optimum
 from lonlib.task.gymnasium_task import environment_versions
 from lonlib.task.interface import task_of
 from lonlib.task.policy import actor_spec, critic_spec
@@ -95,7 +97,20 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
                     f"stored {row['fitness']!r}, its Actor scores {replayed!r}",
                 )
             )
+        if task.config.descriptor:
+            report.findings.extend(_check_task_descriptor(task, row, theta, severity, differs))
         report.replayed += 1
+    if task.config.descriptor:
+        report.findings.append(
+            Finding(
+                "info",
+                "descriptor",
+                None,
+                None,
+                None,
+                f"{task.config.descriptor}: every stored behaviour replayed from its Actor",
+            )
+        )
     for row, start in _rebuilt_starts(folder, config, trials, task.actor_spec.n_params):
         replayed = float(task.fitness(start[None])[0])
         if differs(row["start_fitness"], replayed):
@@ -111,6 +126,31 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
                 )
             )
         report.starts += 1
+
+
+def _check_task_descriptor(
+    task: Any, row: dict, theta: np.ndarray, severity: str, differs: Callable[[Any, float], bool]
+) -> Iterable[Finding]:
+    """A stored Gymnasium optimum's ``b_*`` columns and label against its Actor's replayed
+    descriptor (:func:`lonlib.task.gymnasium_behaviour.describe_optimum`)."""
+    p, run, index = float(row["p"]), int(row["run"]), int(row["index"])
+    replayed = describe_optimum(task, theta, f"verify p={p:g} run {run} optimum {index}")
+    stored = {
+        k: v
+        for k, v in row.items()
+        if (k.startswith(PREFIX) or k == "label") and (isinstance(v, str) or _number(v))
+    }
+    if not stored:
+        yield Finding(severity, "descriptor", p, run, index, "no behaviour descriptor stored")
+        return
+    differing = [
+        f"{name} stored {stored.get(name)!r}, replayed {value!r}"
+        for name, value in replayed.items()
+        if (stored.get(name) != value if name == "label" else differs(stored.get(name), value))
+    ]
+    differing += [f"{name} stored but not replayed" for name in set(stored) - set(replayed)]
+    if differing:
+        yield Finding(severity, "descriptor", p, run, index, "; ".join(sorted(differing)))
 
 
 def algorithm_findings(config, trials: pd.DataFrame, severity: str = "error") -> list[Finding]:

@@ -6,7 +6,7 @@ with a continuous action space (:class:`GymnasiumTask`), behind one :class:`Task
 from lonlib.task.behaviour import BehaviourDescriptor, as_policy, describe, label, relabel
 from lonlib.task.controllers import SwingUpBalanceController
 from lonlib.task.env import ENV_ID, CoupledPendulumEnv, register_envs
-from lonlib.task.gymnasium_behaviour import EpisodeTrace, describe_optimum
+from lonlib.task.gymnasium_behaviour import EpisodeTrace, trace_episode
 from lonlib.task.gymnasium_task import GymnasiumTask, TaskEnvironmentError
 from lonlib.task.interface import PendulumTask, Task, task_of
 from lonlib.task.pendulum import CoupledPendulums, EndReason, Policy
@@ -41,7 +41,6 @@ __all__ = [
     "as_policy",
     "critic_spec",
     "describe",
-    "describe_optimum",
     "evaluate",
     "forward_numpy",
     "label",
@@ -53,4 +52,5 @@ __all__ = [
     "run_policy",
     "score_actors",
     "task_of",
+    "trace_episode",
 ]

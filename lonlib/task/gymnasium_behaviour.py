@@ -16,10 +16,9 @@ a label that is not text) raises ValueError naming ``task.descriptor`` and the e
 
 from __future__ import annotations
 
-import importlib
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,22 +43,6 @@ class EpisodeTrace:
     """``[T]``: the rewards."""
     episode: Episode
     """Its return, length, end and fitness (the stored fitness)."""
-
-
-Descriptor = Callable[[EpisodeTrace], Mapping[str, Any]]
-
-
-def load_descriptor(name: str) -> Descriptor:
-    """The function ``module:function`` names (ValueError naming ``task.descriptor``)."""
-    module_name, _, function_name = name.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as error:
-        raise ValueError(f"task.descriptor: cannot import {module_name!r} ({error})") from None
-    function = getattr(module, function_name, None)
-    if not callable(function):
-        raise ValueError(f"task.descriptor: {module_name!r} has no function {function_name!r}")
-    return function  # type: ignore[no-any-return]
 
 
 class _Recorder(gymnasium.Wrapper):  # type: ignore[type-arg]
@@ -133,6 +116,5 @@ __all__ = [
     "EpisodeTrace",
     "behaviour_columns",
     "describe_optimum",
-    "load_descriptor",
     "trace_episode",
 ]

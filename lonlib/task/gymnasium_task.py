@@ -28,6 +28,7 @@ import numpy as np
 
 from lonlib.config.task import GymnasiumTaskConfig
 from lonlib.task.policy import HIDDEN, NetSpec, forward_numpy
+from lonlib.util.imports import import_function
 
 
 class TaskEnvironmentError(RuntimeError):
@@ -113,11 +114,9 @@ class GymnasiumTask:
         self.action_size = int(action_space.shape[0])
         self.action_low, self.action_span = low, high - low
         self._obs_centre, self._obs_scale = observation_scaling(observation_space, config)
-        self.descriptor = None
+        self.descriptor = None  # the behaviour descriptor (lonlib.task.gymnasium_behaviour)
         if config.descriptor:  # imported now: a wrong name stops before any compute
-            from lonlib.task.gymnasium_behaviour import load_descriptor
-
-            self.descriptor = load_descriptor(config.descriptor)
+            self.descriptor = import_function(config.descriptor, "task.descriptor")
         self.episode_steps = int(config.episode_steps or self.env.spec.max_episode_steps or 0)
         if self.episode_steps <= 0:
             raise ValueError(

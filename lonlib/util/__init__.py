@@ -7,6 +7,7 @@ from lonlib.util.cpu_kernels import (
     pin_torch_cpu_kernels,
     torch_cpu_capability,
 )
+from lonlib.util.imports import import_function
 from lonlib.util.labels import p_label
 from lonlib.util.messages import show_lonlib_messages
 from lonlib.util.paths import project_path, project_root
@@ -19,6 +20,7 @@ __all__ = [
     "check_choice",
     "check_range",
     "expected_torch_capability",
+    "import_function",
     "p_label",
     "pin_torch_cpu_kernels",
     "progress_bar",

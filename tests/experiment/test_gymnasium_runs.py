@@ -263,10 +263,14 @@ def test_a_task_descriptor_is_stored_replayed_and_grouped_by(tmp_path):
     result = analyse(out, close_figures=True)
     assert set(result.behaviours["label"]) == set(trials["label"])
     path = next(out.glob("p=*/run_0000/trials.parquet"))
-    table = pd.read_parquet(path)
-    table.loc[0, "b_end_distance"] += 0.25
-    table.to_parquet(path)
-    reseal(out)  # as if lonlib had written it: the replay, not the seal, must find it
-    report = verify_experiment(out)
-    assert not report.ok and [f.check for f in report.errors] == ["descriptor"]
+    stored = pd.read_parquet(path)
+    flipped = "far" if stored.loc[0, "label"] == "near" else "near"
+    for column, value in (("label", flipped), ("b_steps", 19.0)):
+        table = stored.copy()
+        table.loc[0, column] = value
+        table.to_parquet(path)
+        reseal(out)  # as if lonlib had written it: the replay, not the seal, must find it
+        report = verify_experiment(out)
+        assert not report.ok and [f.check for f in report.errors] == ["descriptor"], column
+        assert column in report.errors[0].message
     assert json.loads((out / "manifest.json").read_text())["config"]["task"]["descriptor"]

@@ -12,8 +12,8 @@ import pytest
 from lonlib.config import GymnasiumTaskConfig
 from lonlib.storage.layout import stored_config
 from lonlib.storage.trials import read_optimum
-from lonlib.task import GymnasiumTask, describe_optimum
-from lonlib.task.gymnasium_behaviour import trace_episode
+from lonlib.task import GymnasiumTask
+from lonlib.task.gymnasium_behaviour import describe_optimum, trace_episode
 
 ROOT = Path(__file__).parents[2]
 PENDULUM_V1 = ROOT / "data" / "gymnasium" / "pendulum-v1"
