@@ -19,6 +19,7 @@ from lonlib.cli._parser import (
     check_arguments,
 )
 from lonlib.storage.atomic import CorruptDataError
+from lonlib.task.gymnasium_task import TaskEnvironmentError
 from lonlib.util.messages import show_lonlib_messages
 
 
@@ -29,7 +30,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         check_arguments(args)
         args.func(args)
-    except (ValueError, CorruptDataError, OSError, MemoryError) as error:
+    except (ValueError, CorruptDataError, OSError, MemoryError, TaskEnvironmentError) as error:
         print(f"lonlib: error: {_error_message(error)}", file=sys.stderr)
         raise SystemExit(2) from None
 

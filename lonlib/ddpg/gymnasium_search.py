@@ -93,6 +93,8 @@ class _TrainingEnv(gymnasium.Wrapper):
         self.where, self.step_number, self.idle = "local search", 0, True
         self.failed = False
         self.observation = np.zeros(task.obs_size)
+        # what the vector env batches: the scaled float64 observation, whatever the space's dtype
+        self.observation_space = gymnasium.spaces.Box(-np.inf, np.inf, (task.obs_size,), np.float64)
 
     def renew(self) -> None:
         """A fresh environment for a new search (the old one closed)."""

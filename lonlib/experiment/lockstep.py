@@ -27,8 +27,8 @@ from __future__ import annotations
 import logging
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
-from contextlib import ExitStack
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,6 +69,7 @@ from lonlib.storage.inflight import (
 from lonlib.storage.layout import Job
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import save_step
+from lonlib.task.gymnasium_task import TaskEnvironmentError
 from lonlib.util.validation import check_range
 
 log = logging.getLogger(__name__)
@@ -236,6 +237,10 @@ class LockstepBatch:
 
     def refill(self, trainer: SlotTrainer, runs: list[_Run]) -> None:
         """Start the searches ``runs`` asked for in free slots of ``trainer``."""
+        with self.naming_runs():
+            self._start(trainer, runs)
+
+    def _start(self, trainer: SlotTrainer, runs: list[_Run]) -> None:
         trainer.start(
             trainer.free_slots()[: len(runs)],
             np.stack([r.request.theta for r in runs]),
@@ -260,8 +265,14 @@ class LockstepBatch:
     ) -> list[tuple[Job, LocalSearchResult]]:
         """One step of ``trainer``; a Gymnasium environment's failure names its run (what the
         run stored before stays)."""
-        try:
+        with self.naming_runs():
             return trainer.step()
+
+    @contextmanager
+    def naming_runs(self) -> Iterator[None]:
+        """A Gymnasium environment's failure in a search of the batch names its run."""
+        try:
+            yield
         except SlotEnvironmentError as error:
             run = self.active[error.tag]
             raise run_failure(run.p, run.run, len(run.driver.state.trials), error) from None
@@ -331,7 +342,8 @@ class LockstepBatch:
                 first.append(self.ask(run))
             if not first:
                 return
-            trainer = self.new_trainer(first)
+            with self.naming_runs():
+                trainer = self.new_trainer(first)
             checkpoint, checkpoint_written = None, time.monotonic()
         self.start_first = False  # the first fill is over: the drain time holds from here
         last_tick, steps_at_tick = time.monotonic(), 0
@@ -351,7 +363,11 @@ class LockstepBatch:
                 )
             for tag, result in ended:
                 run = self.active[tag]
-                optimum = self.optimum(result)
+                try:
+                    optimum = self.optimum(result)
+                except TaskEnvironmentError as error:  # its descriptor's episode
+                    done = len(run.driver.state.trials)
+                    raise run_failure(run.p, run.run, done, error) from None
                 run.driver.record(run.request, optimum, result.seconds)
                 save_step(self.out, run.p, run.run, run.driver.state.trials, optimum)
                 if run.driver.finished or drained:

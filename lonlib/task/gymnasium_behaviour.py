@@ -87,8 +87,22 @@ def describe_optimum(
     floats and, if the descriptor gives one, ``label``; empty without a descriptor."""
     if not task.config.descriptor:
         return {}
-    described = task.descriptor(trace_episode(task, theta, where))
-    return behaviour_columns(described, task.config.descriptor)
+    trace = trace_episode(task, theta, where)
+    try:
+        described = task.descriptor(trace)
+    except Exception as error:  # the user's code: one line naming it
+        raise ValueError(
+            f"task.descriptor ({task.config.descriptor}) raised {type(error).__name__}: {error}"
+        ) from None
+    columns = behaviour_columns(described, task.config.descriptor)
+    names = sorted(columns)
+    first = task.__dict__.setdefault("_descriptor_names", names)
+    if names != first:  # a stored row must keep its columns (its digest covers them)
+        raise ValueError(
+            f"task.descriptor ({task.config.descriptor}) must return the same names for "
+            f"every optimum: {first} before, now {names}"
+        )
+    return columns
 
 
 def behaviour_columns(described: Any, name: str) -> dict[str, Any]:

@@ -4,6 +4,7 @@ and seed."""
 
 import dataclasses
 
+import gymnasium
 import numpy as np
 import pytest
 
@@ -162,3 +163,32 @@ GOLDEN = (
     0.9302316212837491,
     "e31576f104570f84a6d0fd83eac69d9b82b50ee501dc60b0a4eee80c5132ebcb",
 )
+
+
+class IntegerObservations(gymnasium.Env):
+    """A counter observed as uint8: the scaled float observations must not be cast back."""
+
+    observation_space = gymnasium.spaces.Box(0, 255, (1,), np.uint8)
+    action_space = gymnasium.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.array([0], dtype=np.uint8), {}
+
+    def step(self, action):
+        self.t += 1
+        return np.array([self.t], dtype=np.uint8), -abs(float(action[0])), False, False, {}
+
+
+gymnasium.register("lonlib-test/IntegerObservations-v0", IntegerObservations, max_episode_steps=20)
+
+
+def test_an_integer_observation_space_trains():
+    task = GymnasiumTask(GymnasiumTaskConfig("lonlib-test/IntegerObservations-v0", (-20.0, 0.0)))
+    rng = np.random.default_rng(0)
+    hp = dataclasses.replace(BATCHED, warmup_steps=20, max_steps=60)
+    result = gymnasium_local_search(
+        task, task.actor_spec.initial(rng), task.critic_spec.initial(rng), hp, 0
+    )
+    assert result.env_steps == 60 and 0 <= result.fitness <= 1

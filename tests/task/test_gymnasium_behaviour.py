@@ -90,3 +90,37 @@ def test_a_wrong_return_names_the_descriptor_and_the_entry(returned, error):
     assert str(raised.value).startswith("task.descriptor (my:descriptor)") and error in str(
         raised.value
     )
+
+
+def raising(trace):
+    raise KeyError("upright")
+
+
+CALLS = []
+
+
+def varying(trace):
+    CALLS.append(1)
+    return {"x": 1.0} if len(CALLS) == 1 else {"x": 1.0, "label": "late"}
+
+
+@pytest.mark.parametrize(
+    "name, error",
+    [
+        ("raising", "raised KeyError: 'upright'"),
+        ("varying", "must return the same names for every optimum"),
+    ],
+)
+def test_a_descriptor_that_raises_or_varies_is_one_line(name, error):
+    config = GymnasiumTaskConfig(
+        "Pendulum-v1",
+        (-3254.72, 0.0),
+        episode_steps=5,
+        descriptor=f"tests.task.test_gymnasium_behaviour:{name}",
+    )
+    task = GymnasiumTask(config)
+    theta = task.actor_spec.initial(np.random.default_rng(0))
+    with pytest.raises(ValueError) as raised:
+        describe_optimum(task, theta)
+        describe_optimum(task, theta)
+    assert error in str(raised.value) and "\n" not in str(raised.value)
