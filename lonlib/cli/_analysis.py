@@ -124,6 +124,11 @@ def verify_verb(args: argparse.Namespace) -> None:
         failed = failed or bool(mismatches)
     if failed:
         raise SystemExit(1)
+    if args.seal and _outputs_pending(root):
+        raise ValueError(
+            f"not sealed: {root} holds figures or recordings an interrupted `lonlib analyse` "
+            "or `record` left part-way (sealed ahead); run that command again first, then seal"
+        )
     if args.seal:
         from lonlib.analysis.verify import seal_experiment
 
@@ -170,3 +175,19 @@ __all__ = [
     "thin_verb",
     "verify_verb",
 ]
+
+
+def _outputs_pending(root: Path) -> bool:
+    """Does the folder's seal hold outputs sealed ahead (``figures.next``,
+    ``recordings_next``) that an interrupted analyse or record has not put in place?"""
+    import json
+
+    path = root / "seal.json"
+    if not path.is_file():
+        return False
+    try:
+        seal = json.loads(path.read_text())
+    except ValueError:
+        return False  # the seal check reports it
+    figures = seal.get("figures") if isinstance(seal, dict) else None
+    return bool((isinstance(figures, dict) and figures.get("next")) or seal.get("recordings_next"))

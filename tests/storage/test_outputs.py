@@ -264,3 +264,20 @@ def test_an_unsealed_folder_gets_its_outputs_renamed_and_no_seal(sampled, tmp_pa
         result = analyse(out, close_figures=True, conditioning=False)
     assert all(path.parent == out / "figures" and path.is_file() for path in result.files)
     assert not (out / SEAL_NAME).exists() and not (out / "figures" / STAGING).exists()
+
+
+def test_verify_seal_refuses_a_folder_an_analysis_left_part_way(sampled, tmp_path, monkeypatch):
+    """A mixed set of old and new figures is never sealed as complete: ``--seal`` asks for
+    the interrupted command first."""
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True, **EARLIER)
+    kill_at(monkeypatch, "summary.csv#1")
+    with pytest.raises(Killed):
+        analyse(out, close_figures=True)
+    monkeypatch.undo()
+    with pytest.raises(SystemExit) as exited:
+        cli_main(["verify", str(out), "--seal"])
+    assert exited.value.code == 2
+    assert json.loads((out / SEAL_NAME).read_text())["figures"].get("next")
+    analyse(out, close_figures=True)
+    assert_complete(out)
