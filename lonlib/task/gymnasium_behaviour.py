@@ -96,7 +96,9 @@ def describe_optimum(
         ) from None
     columns = behaviour_columns(described, task.config.descriptor)
     names = sorted(columns)
-    first = task.__dict__.setdefault("_descriptor_names", names)
+    if task.descriptor_names is None:
+        task.descriptor_names = names
+    first = task.descriptor_names
     if names != first:  # a stored row must keep its columns (its digest covers them)
         raise ValueError(
             f"task.descriptor ({task.config.descriptor}) must return the same names for "

@@ -117,6 +117,7 @@ class GymnasiumTask:
         self.descriptor = None  # the behaviour descriptor (lonlib.task.gymnasium_behaviour)
         if config.descriptor:  # imported now: a wrong name stops before any compute
             self.descriptor = import_function(config.descriptor, "task.descriptor")
+        self.descriptor_names: list[str] | None = None  # the first described optimum's
         self.episode_steps = int(config.episode_steps or self.env.spec.max_episode_steps or 0)
         if self.episode_steps <= 0:
             raise ValueError(
