@@ -61,7 +61,7 @@ DIGESTS_FORMAT, DIGESTS_WRITE = (
     "lonlib/storage/_digests_write.py",
 )
 DIGESTS_CHECK, TRIALS = "lonlib/storage/_digests_check.py", "lonlib/storage/trials.py"
-OUTPUTS = "lonlib/storage/outputs.py"
+OUTPUTS, PIPELINE = "lonlib/storage/outputs.py", "lonlib/analysis/pipeline.py"
 SESSION = "lonlib/storage/session.py"
 JUDGED_LOG = "lonlib/calibration/judged_log.py"
 HOLDING, POWER = "lonlib/analysis/holding.py", "lonlib/analysis/claims_power.py"
@@ -140,11 +140,12 @@ GUARDS = {
     HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
     POWER: ["tests/analysis/test_claims_power.py"],
     KERNELS: ["tests/task/test_compiled_rollout.py"],
-    DIGESTS_FORMAT: ["tests/storage/test_digests.py"],
     # the outputs of analyse and record sealed ahead: test_outputs kills them at each point
+    DIGESTS_FORMAT: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
     DIGESTS_WRITE: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
     DIGESTS_CHECK: ["tests/storage/test_digests.py", "tests/storage/test_outputs.py"],
     OUTPUTS: ["tests/storage/test_outputs.py"],
+    PIPELINE: ["tests/storage/test_outputs.py"],
     GYM_DDPG: ["tests/ddpg/test_gymnasium_search.py"],
     GYM_BEHAVIOUR: [
         "tests/task/test_gymnasium_behaviour.py",
@@ -342,6 +343,43 @@ MUTANTS = [
         "    ahead.update({_key(root, folder / name): None for name in gone})",
         "    pass",
         "a figure an analysis removes is removed without its removal sealed ahead",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "elif digest is not None and path.is_file() and file_digest(path) == digest:",
+        "elif digest is not None and path.is_file():",
+        "a figure sealed ahead is accepted whatever it holds (tampered while pending passes)",
+    ),
+    Mutant(
+        DIGESTS_CHECK,
+        'if file_digest(folder / name) == (ahead or {})[name].get("sha256")',
+        "if True",
+        "a recording sealed ahead is accepted whatever it holds (tampered while pending passes)",
+    ),
+    Mutant(
+        PIPELINE,
+        "index = {**recordings_index(folder), **recordings_index(folder, files=set(paths))}",
+        "index = recordings_index(folder, files=set(paths))",
+        "record's index lists only the recordings it wrote (a smaller record drops the others)",
+    ),
+    Mutant(
+        DIGESTS_WRITE,
+        '    elif recordings is None and "recordings_next" in old:\n'
+        '        seal["recordings_next"] = old["recordings_next"]',
+        "    elif False:\n        pass",
+        "a later reseal (analyse, thin) forgets the recordings a killed record sealed ahead",
+    ),
+    Mutant(
+        OUTPUTS,
+        "with exclusive_lock(folder / OUTPUTS_LOCK, record_holder=False):",
+        "with open(os.devnull):",
+        "two analyses (or records) of one folder stage and publish at once (no outputs lock)",
+    ),
+    Mutant(
+        PIPELINE,
+        "removed.extend(ROBUST_CLAIMS_FILES)",
+        "pass",
+        "the robust claims an analysis no longer makes stay (stale) in the figures",
     ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),

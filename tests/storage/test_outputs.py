@@ -9,6 +9,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from fnmatch import fnmatch
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from lonlib.analysis.verify import verify_experiment
 from lonlib.cli import main as cli_main
 from lonlib.storage.digests import SEAL_NAME, check_experiment_seal
 from lonlib.storage.layout import read_manifest
-from lonlib.storage.outputs import STAGING, publish_figures, staging_folder
+from lonlib.storage.outputs import OUTPUTS_LOCK, STAGING, publish_figures, staging_folder
 from tests.conftest import sample_small
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -281,3 +282,164 @@ def test_verify_seal_refuses_a_folder_an_analysis_left_part_way(sampled, tmp_pat
     assert json.loads((out / SEAL_NAME).read_text())["figures"].get("next")
     analyse(out, close_figures=True)
     assert_complete(out)
+
+
+def test_a_figure_tampered_while_its_new_digest_is_pending_ahead_differs(
+    sampled, tmp_path, monkeypatch
+):
+    """A figure put in place as sealed ahead (an analysis killed part-way) is accepted only
+    while it holds what was sealed ahead: edited, verify names it."""
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True, **EARLIER)
+    kill_at(monkeypatch, "fig2_optima_boxplot.png#1")
+    with pytest.raises(Killed):
+        analyse(out, close_figures=True)
+    monkeypatch.undo()
+    name = "figures/fig2_optima_boxplot.png"
+    assert name in json.loads((out / SEAL_NAME).read_text())["figures"]["next"]["files"]
+    (out / name).write_bytes((out / name).read_bytes() + b"\0")
+    problems = dict(check_experiment_seal(out, read_manifest(out)).problems)
+    assert "differs from its seal" in problems[name], problems
+    assert any(name in str(error) for error in verify_experiment(out).errors)
+
+
+def test_a_recording_tampered_while_its_new_digest_is_pending_ahead_differs(
+    sampled, tmp_path, monkeypatch
+):
+    """The same for a recording sealed ahead (``recordings_next``): the one put in place and
+    the one not yet, each edited, are named."""
+    out = copy_of(sampled, tmp_path)
+    record_optima(out, limit=RECORDINGS)
+    kill_at(monkeypatch, "*.rrd#1")
+    with pytest.raises(Killed):
+        record_optima(out, limit=RECORDINGS)
+    monkeypatch.undo()
+    names = sorted(json.loads((out / SEAL_NAME).read_text())["recordings_next"])
+    assert len(names) == RECORDINGS
+    for name in names:
+        path = out / "recordings" / name
+        path.write_bytes(path.read_bytes() + b"\0")
+    problems = dict(check_experiment_seal(out, read_manifest(out)).problems)
+    for name in names:
+        assert "differs from its seal" in problems[f"recordings/{name}"], problems
+    assert len(verify_experiment(out).errors) >= RECORDINGS
+
+
+def test_a_smaller_record_keeps_the_earlier_recordings_in_the_index(sampled, tmp_path, capsys):
+    """``record --limit 1`` after ``--limit 2``: the recording it does not write again stays
+    in the index, and the folder verifies."""
+    out = copy_of(sampled, tmp_path)
+    cli_main(["record", str(out), "--limit", "2"])
+    cli_main(["record", str(out), "--limit", "1"])
+    index = json.loads((out / SEAL_NAME).read_text())["recordings"]
+    assert sorted(index) == sorted(p.name for p in (out / "recordings").glob("*.rrd"))
+    assert len(index) == 2
+    capsys.readouterr()
+    cli_main(["verify", str(out)])
+    assert "verify: OK" in capsys.readouterr().out
+    assert_complete(out)
+
+
+@pytest.mark.parametrize("later", ["analyse", "thin"])
+def test_a_later_reseal_keeps_the_recordings_a_killed_record_sealed_ahead(
+    sampled, tmp_path, monkeypatch, later
+):
+    """A record killed after its seal ahead, then an analyse (or a thin) that reseals the root:
+    the recordings sealed ahead stay sealed ahead (pending, never a false tamper), and record
+    again completes them."""
+    import lonlib.storage.thin as thin
+
+    out = copy_of(sampled, tmp_path)
+    record_optima(out, limit=RECORDINGS)
+    kill_at(monkeypatch, "*.rrd#1")
+    with pytest.raises(Killed):
+        record_optima(out, limit=RECORDINGS)
+    monkeypatch.undo()
+    if later == "analyse":
+        analyse(out, close_figures=True, conditioning=False)
+    else:  # a thin that rewrites every history (these tiny ones have no row to drop)
+        monkeypatch.setattr(thin, "thinned_history", lambda history: history.iloc[:0])
+        assert thin.thin_histories(out).thinned > 0  # then it reseals the root
+        monkeypatch.undo()
+    assert "recordings_next" in json.loads((out / SEAL_NAME).read_text())
+    pending = assert_not_tampered(out)
+    assert any("recordings sealed ahead" in what for _, what in pending), pending
+    record_optima(out, limit=RECORDINGS)
+    assert_complete(out)
+
+
+HOLDER = """
+import sys, time
+from pathlib import Path
+
+from lonlib.storage.outputs import staging_folder
+
+folder, marks = Path(sys.argv[1]), Path(sys.argv[2])
+with staging_folder(folder):
+    (marks / "held").touch()
+    deadline = time.monotonic() + 120
+    while not (marks / "release").exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    (marks / "left").touch()
+"""
+
+
+def wait_for(path: Path, process: subprocess.Popen) -> None:
+    """Until ``path`` exists (the process, alive, wrote it): fails if the process ends first."""
+    deadline = time.monotonic() + 120
+    while not path.exists():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline, f"{path} never appeared"
+        time.sleep(0.01)
+
+
+def test_two_processes_staging_one_folder_take_turns(tmp_path):
+    """The outputs' lock: while one process is in its staging block, the lock is held; a
+    second process staging the same folder enters only once the first has left."""
+    from lonlib.storage.lock import LockHeld, exclusive_lock
+
+    folder, marks = tmp_path / "figures", tmp_path / "marks"
+    marks.mkdir()
+    script = tmp_path / "holder.py"
+    script.write_text(HOLDER)
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    first = subprocess.Popen(
+        [sys.executable, str(script), str(folder), str(marks)],
+        env=env,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_for(marks / "held", first)
+        with pytest.raises(LockHeld), exclusive_lock(folder / OUTPUTS_LOCK, wait=False):
+            pass
+        (marks / "release").touch()
+        with staging_folder(folder) as staging:  # waits for the first to leave its block
+            assert (marks / "left").exists()
+            assert staging.is_dir()
+    finally:
+        first.communicate(timeout=120)
+    assert first.returncode == 0
+
+
+def test_the_robust_claims_an_analysis_no_longer_makes_are_removed(sampled, tmp_path, monkeypatch):
+    """An analysis whose re-scoring is refused (no robust claims) removes the earlier ones,
+    and the folder verifies."""
+    import pandas as pd
+
+    import lonlib.analysis.pipeline as pipeline
+    from lonlib.analysis.claims_rescored import FILES
+
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True)
+    assert all((out / "figures" / name).is_file() for name in FILES)
+    refused = (pd.DataFrame(), pd.DataFrame(), [])
+    monkeypatch.setattr(pipeline, "write_robust_claims", lambda *args, **kwargs: refused)
+    analyse(out, close_figures=True)
+    assert not any((out / "figures" / name).exists() for name in FILES)
+    sealed = json.loads((out / SEAL_NAME).read_text())["figures"]["files"]
+    assert not any(f"figures/{name}" in sealed for name in FILES)
+    assert_complete(out)
+    assert verify_experiment(out).errors == []
