@@ -381,6 +381,13 @@ MUTANTS = [
         "pass",
         "the robust claims an analysis no longer makes stay (stale) in the figures",
     ),
+    Mutant(
+        DIGESTS_CHECK,
+        "if outputs.problems and check.ok:",
+        "if False:",
+        "a check that read the seal before an analysis renamed its outputs reports them as "
+        "differing (no second read)",
+    ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
     Mutant(

@@ -88,7 +88,9 @@ def check_experiment_seal(
 ) -> SealCheck:
     """Compare an experiment folder with its seal: configuration, each run's trials (rows,
     chain, count against the root and, with ``files``, the trials' files), and (asked) the
-    recordings and figures."""
+    recordings and figures (differences among them alone are checked again, once, against
+    the seal read again: an ``analyse`` or ``record`` may have renamed its outputs between
+    the two reads)."""
     root = Path(root)
     check = SealCheck(root, is_sealed(root))
     if not check.sealed:
@@ -122,6 +124,26 @@ def check_experiment_seal(
     for key, folder in folders.items():
         run = _SealedRun(key, folder, sealed_runs.get(key), seal.get("chain_config"))
         _check_run(check, run, files)
+    outputs = _check_outputs(root, seal, figures, recordings)
+    if outputs.problems and check.ok:
+        # `analyse` or `record` may have sealed ahead and renamed its outputs between this
+        # check's read of the seal and its read of the files: read both again, once
+        try:
+            again = read_seal(root / SEAL_NAME)
+        except TamperedDataError:
+            again = None
+        if again is not None and again.get("kind") == "experiment":
+            outputs = _check_outputs(root, again, figures, recordings)
+    check.problems += outputs.problems
+    check.pending += outputs.pending
+    return check
+
+
+def _check_outputs(
+    root: Path, seal: Mapping[str, Any], figures: bool, recordings: bool
+) -> SealCheck:
+    """What the recordings (asked) and the figures (asked) show against ``seal``."""
+    check = SealCheck(root, True)
     if recordings:
         _check_recordings(check, root, seal.get("recordings"), seal.get("recordings_next"))
     if figures:

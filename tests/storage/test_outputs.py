@@ -443,3 +443,32 @@ def test_the_robust_claims_an_analysis_no_longer_makes_are_removed(sampled, tmp_
     assert not any(f"figures/{name}" in sealed for name in FILES)
     assert_complete(out)
     assert verify_experiment(out).errors == []
+
+
+def test_a_check_that_read_the_seal_before_an_analysis_renamed_reads_it_again(
+    sampled, tmp_path, monkeypatch
+):
+    """A seal check that read ``seal.json`` before ``analyse`` sealed ahead, and the files
+    after it renamed them, finds differences among the figures only: it reads the seal and
+    the files again, once, before reporting them (a real difference stays reported)."""
+    import lonlib.storage._digests_check as digests_check
+
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True, **EARLIER)
+    old = json.loads((out / SEAL_NAME).read_text())
+    analyse(out, close_figures=True)
+    real, reads = digests_check.read_seal, []
+
+    def first_read_is_old(path):
+        reads.append(path)
+        return old if len(reads) == 1 else real(path)
+
+    monkeypatch.setattr(digests_check, "read_seal", first_read_is_old)
+    check = check_experiment_seal(out, read_manifest(out))
+    assert check.ok and check.pending == [], (check.problems, check.pending)
+    assert len(reads) == 2
+    path = out / "figures" / "summary.csv"
+    path.write_text(path.read_text() + "\n")
+    reads.clear()
+    problems = dict(check_experiment_seal(out, read_manifest(out)).problems)
+    assert list(problems) == ["figures/summary.csv"] and len(reads) == 2
