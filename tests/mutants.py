@@ -388,6 +388,18 @@ MUTANTS = [
         "a check that read the seal before an analysis renamed its outputs reports them as "
         "differing (no second read)",
     ),
+    Mutant(
+        DIGESTS_FORMAT,
+        'bad = [n for n in ahead.get("files", {}) if not _is_figure_key(n)]',
+        "bad = []",
+        "figures.next may name a file outside figures/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        'bad = [n for n in payload.get("recordings_next", {}) if not _is_file_name(n)]',
+        "bad = []",
+        "recordings_next may name a file outside recordings/",
+    ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
     Mutant(

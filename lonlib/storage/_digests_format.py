@@ -214,6 +214,9 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
             isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
         ):
             return f"'{name}' is not a mapping of recordings to their trial and digest"
+    bad = [n for n in payload.get("recordings_next", {}) if not _is_file_name(n)]
+    if bad:
+        return f"'recordings_next' names {bad[0]!r}, not a plain file name"
     for name in ("result_path_versions", "result_path_versions_next"):
         if name in payload and not isinstance(payload[name], list):
             return f"'{name}' is not a list"
@@ -233,7 +236,25 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
         and (ahead.get("inputs") is None or _is_digest(ahead.get("inputs")))
     ):
         return "'figures.next' is not a mapping of figures to digests (or None) and their inputs"
+    bad = [n for n in ahead.get("files", {}) if not _is_figure_key(n)]
+    if bad:
+        return f"'figures.next' names {bad[0]!r}, not a file under {FIGURES_FOLDER}/"
     return None
+
+
+def _is_file_name(name: str) -> bool:
+    """A plain file name: no folder, not ``.`` or ``..``."""
+    return bool(name) and name not in (".", "..") and not set(name) & {"/", "\\", "\0"}
+
+
+def _is_figure_key(name: str) -> bool:
+    """A relative POSIX path of a file under the figures folder, with no ``..``."""
+    parts = name.split("/")
+    return (
+        len(parts) >= 2
+        and parts[0] == FIGURES_FOLDER
+        and all(_is_file_name(part) for part in parts[1:])
+    )
 
 
 def is_sealed(root: Path) -> bool:

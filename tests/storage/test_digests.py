@@ -449,6 +449,40 @@ def test_a_malformed_seal_is_one_line_naming_it(small, copy, shape):
     assert any("seal.json" in e for e in findings(copy))
 
 
+DIGEST = "0" * 64
+
+
+@pytest.mark.parametrize(
+    "field, shape",
+    [
+        ("figures.next", {"figures": {"next": {"files": {"figures/../manifest.json": None}}}}),
+        ("figures.next", {"figures": {"next": {"files": {"/etc/passwd": DIGEST}}}}),
+        ("figures.next", {"figures": {"next": {"files": {"p=0.001/trials.parquet": None}}}}),
+        ("figures.next", {"figures": {"next": {"files": {"figures": None}}}}),
+        ("recordings_next", {"recordings_next": {"../seal.json": {"sha256": DIGEST}}}),
+        ("recordings_next", {"recordings_next": {"a/b.rrd": {"sha256": DIGEST}}}),
+        ("recordings_next", {"recordings_next": {"..": {"sha256": DIGEST}}}),
+    ],
+    ids=[
+        "figure ..",
+        "figure absolute",
+        "figure elsewhere",
+        "the folder",
+        "recording ../",
+        "recording in a folder",
+        "recording named ..",
+    ],
+)
+def test_a_seal_ahead_naming_a_file_outside_its_folder_is_malformed(small, copy, field, shape):
+    """The outputs sealed ahead name files under ``figures/`` (relative, no ``..``) and plain
+    recording names: any other key is the seal's shape error naming the field."""
+    seal = json.loads((copy / SEAL_NAME).read_text())
+    (copy / SEAL_NAME).write_text(json.dumps({**seal, **shape}))
+    with pytest.raises(TamperedDataError, match=f"seal.json: not a well-formed seal.*'{field}'"):
+        load_experiment(copy)
+    assert any("seal.json" in e and field in e for e in findings(copy))
+
+
 def test_a_malformed_run_digests_is_one_line_naming_it(small, copy):
     (run_dir(copy, P, 0) / RUN_DIGESTS).write_text('{"format": 1, "trials": "x"}')
     with pytest.raises(TamperedDataError, match="digests.json: not a well-formed seal"):
