@@ -400,6 +400,12 @@ MUTANTS = [
         "bad = []",
         "recordings_next may name a file outside recordings/",
     ),
+    Mutant(
+        OUTPUTS,
+        "        if planted:\n            staging.unlink()",
+        "        if planted:\n            pass",
+        "a file or link planted under the staging name blocks analyse and record",
+    ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
     Mutant(

@@ -26,7 +26,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from lonlib.storage.atomic import write_error
+from lonlib.storage.atomic import DataWriteError, write_error
 from lonlib.storage.digests import file_digest, reseal_outputs, seal_outputs_ahead
 from lonlib.storage.lock import exclusive_lock
 
@@ -42,17 +42,38 @@ def staging_folder(folder: Path) -> Iterator[Path]:
     ``folder``, if missing) to write outputs into before :func:`publish_figures` or
     :func:`publish_recordings` (called in the block) puts them in place. ``folder``'s lock
     (:data:`OUTPUTS_LOCK`) is held meanwhile: another ``analyse`` or ``record`` of the same
-    folder waits, and what a killed one left in the hidden folder is removed first. Use the
+    folder waits, and what a killed one left in the hidden folder is removed first (a file
+    or link found under :data:`STAGING`, lonlib's reserved name, is unlinked). Use the
     outputs' own file names (a rerun recording's id is made from its name)."""
     folder = Path(folder)
     with exclusive_lock(folder / OUTPUTS_LOCK, record_holder=False):
         staging = folder / STAGING
+        _clear(staging)
         try:
-            shutil.rmtree(staging, ignore_errors=True)
             staging.mkdir()
         except OSError as error:
             raise write_error(staging, error) from error
         yield staging
+
+
+def _clear(staging: Path) -> None:
+    """Make way for the hidden folder: what a killed run left in it removed, and a file or
+    link found under its reserved name unlinked (a link never followed)."""
+    planted = staging.is_symlink() or (staging.exists() and not staging.is_dir())
+    try:
+        if planted:
+            staging.unlink()
+        else:
+            shutil.rmtree(staging, ignore_errors=True)
+        if os.path.lexists(staging):
+            raise FileExistsError(errno.EEXIST, "it is still there")
+    except OSError as error:
+        raise DataWriteError(
+            error.errno,
+            f"{staging}: lonlib's reserved staging name ({STAGING}, where analyse and record "
+            f"write their outputs first) could not be cleared ({error.strerror or error}); "
+            "remove it, then run again",
+        ) from error
 
 
 def publish_figures(root: Path, staged: Iterable[Path], removed: Iterable[str] = ()) -> list[Path]:

@@ -472,3 +472,44 @@ def test_a_check_that_read_the_seal_before_an_analysis_renamed_reads_it_again(
     reads.clear()
     problems = dict(check_experiment_seal(out, read_manifest(out)).problems)
     assert list(problems) == ["figures/summary.csv"] and len(reads) == 2
+
+
+@pytest.mark.parametrize("planted", ["file", "link to a folder", "dangling link"])
+def test_a_file_or_link_planted_under_the_staging_name_is_removed(tmp_path, planted):
+    """``.staging.tmp`` is lonlib's reserved name: a file or link there is unlinked (a link
+    never followed), not a misleading write error."""
+    folder, elsewhere = tmp_path / "figures", tmp_path / "elsewhere"
+    folder.mkdir()
+    elsewhere.mkdir()
+    (elsewhere / "kept.txt").write_text("kept")
+    staging = folder / STAGING
+    if planted == "file":
+        staging.write_text("not a folder")
+    elif planted == "link to a folder":
+        staging.symlink_to(elsewhere)
+    else:
+        staging.symlink_to(tmp_path / "nowhere")
+    with staging_folder(folder) as made:
+        assert made == staging and made.is_dir() and not made.is_symlink()
+        assert list(made.iterdir()) == []
+    assert (elsewhere / "kept.txt").read_text() == "kept"
+
+
+def test_a_planted_staging_name_that_cannot_be_removed_is_named(tmp_path, monkeypatch):
+    from lonlib.storage.atomic import DataWriteError
+
+    folder = tmp_path / "figures"
+    folder.mkdir()
+    (folder / STAGING).write_text("not a folder")
+    real_unlink = Path.unlink
+
+    def refuse(self, *args, **kwargs):
+        if self.name == STAGING:
+            raise PermissionError(13, "Permission denied")
+        return real_unlink(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "unlink", refuse)
+    reserved = r"\.staging\.tmp.*reserved"
+    with pytest.raises(DataWriteError, match=reserved) as raised, staging_folder(folder):
+        pass
+    assert str(folder / STAGING) in str(raised.value) and "\n" not in str(raised.value)
