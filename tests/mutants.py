@@ -406,6 +406,12 @@ MUTANTS = [
         "        if planted:\n            pass",
         "a file or link planted under the staging name blocks analyse and record",
     ),
+    Mutant(
+        DIGESTS_WRITE,
+        "        remove_temporary_files(root, SEAL_NAME)",
+        "        pass",
+        "what a killed write of the root left stays",
+    ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
     Mutant(

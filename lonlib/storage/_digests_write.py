@@ -35,7 +35,7 @@ from lonlib.storage._digests_format import (
     write_run,
     write_seal,
 )
-from lonlib.storage.atomic import read_json, write_json
+from lonlib.storage.atomic import read_json, remove_temporary_files, write_json
 
 
 def settle_ahead(run_folder: Path, root: Path) -> None:
@@ -353,7 +353,8 @@ def seal_outputs_ahead(
     (the index the recordings folder will hold, each entry with its ``sha256``) sealed
     ahead in the root, under the manifest lock, so that a kill between two renames, or
     before the reseal (:func:`reseal_outputs`) that settles them, leaves every file
-    accepted as sealed or as sealed ahead (pending, never tampered). Nothing in an unsealed
+    accepted as sealed or as sealed ahead (pending, never tampered). What a killed write of
+    the root left (``.seal.json.<random>.tmp``) is removed first. Nothing in an unsealed
     folder (returns False)."""
     from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
     from lonlib.storage.lock import exclusive_lock
@@ -362,6 +363,7 @@ def seal_outputs_ahead(
     if not is_sealed(root):
         return False
     with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
+        remove_temporary_files(root, SEAL_NAME)  # every write of the root holds this lock
         write_root(root, read_manifest(root), figures_ahead=figures, recordings_ahead=recordings)
     return True
 

@@ -513,3 +513,16 @@ def test_a_planted_staging_name_that_cannot_be_removed_is_named(tmp_path, monkey
     with pytest.raises(DataWriteError, match=reserved) as raised, staging_folder(folder):
         pass
     assert str(folder / STAGING) in str(raised.value) and "\n" not in str(raised.value)
+
+
+def test_a_killed_seal_writes_temporary_is_removed_by_the_next_seal_ahead(sampled, tmp_path):
+    """``.seal.json.<random>.tmp``, what a seal write killed before its rename leaves, is
+    removed when the outputs are sealed ahead (under the manifest lock)."""
+    out = copy_of(sampled, tmp_path)
+    leftover = out / ".seal.json.k1ll3d.tmp"
+    leftover.write_text('{"format": 1')
+    with staging_folder(out / "figures") as staging:
+        (staging / "metrics.csv").write_text("p\n0.001\n")
+        publish_figures(out, [staging / "metrics.csv"])
+    assert not leftover.exists()
+    assert_complete(out)
