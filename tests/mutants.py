@@ -412,6 +412,12 @@ MUTANTS = [
         "        pass",
         "what a killed write of the root left stays",
     ),
+    Mutant(
+        OUTPUTS,
+        "folder = _target(staged, staging)",
+        "folder = _target(staged)",
+        "an analysis that writes nothing does not remove the files it no longer makes",
+    ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),
     Mutant(

@@ -76,17 +76,26 @@ def _clear(staging: Path) -> None:
         ) from error
 
 
-def publish_figures(root: Path, staged: Iterable[Path], removed: Iterable[str] = ()) -> list[Path]:
-    """Put the figures and tables ``staged`` (files of :func:`staging_folder`'s folder) in
-    place in the folder above it, and remove those named ``removed`` (file names there that
-    this analysis no longer makes), sealed ahead and resealed in a sealed experiment
-    ``root`` (see the module docstring): their final paths, in the order given (each once).
-    The 3-D LON's HTML pages are put in place too, not sealed (kept out of git)."""
+def publish_figures(
+    root: Path,
+    staged: Iterable[Path],
+    removed: Iterable[str] = (),
+    *,
+    staging: Path | None = None,
+) -> list[Path]:
+    """Put the figures and tables ``staged`` (files of :func:`staging_folder`'s folder,
+    ``staging``, which names it when nothing is staged) in place in the folder above it,
+    and remove those named ``removed`` (file names there that this analysis no longer
+    makes), sealed ahead and resealed in a sealed experiment ``root`` (see the module
+    docstring): their final paths, in the order given (each once). The 3-D LON's HTML
+    pages are put in place too, not sealed (kept out of git)."""
     root, staged = Path(root), list(dict.fromkeys(Path(p) for p in staged))
-    folder = _target(staged)
+    folder = _target(staged, staging)
     if folder is None:
         return []
     gone = sorted({name for name in removed if (folder / name).exists()})
+    if not staged and not gone:
+        return []
     final = [folder / path.name for path in staged]
     for path in staged:
         _sync(path)
@@ -99,7 +108,7 @@ def publish_figures(root: Path, staged: Iterable[Path], removed: Iterable[str] =
     seal_outputs_ahead(root, figures=ahead)
     _rename(staged, folder, gone)
     reseal_outputs(root, figures=final)
-    shutil.rmtree(staged[0].parent, ignore_errors=True)
+    shutil.rmtree(folder / STAGING, ignore_errors=True)
     return final
 
 
@@ -130,14 +139,15 @@ def publish_recordings(
     return [folder / path.name for path in staged]
 
 
-def _target(staged: list[Path]) -> Path | None:
-    """The folder the staged files go to (the one above their staging folder)."""
-    if not staged:
+def _target(staged: list[Path], staging: Path | None = None) -> Path | None:
+    """The folder the staged files (of ``staging``, when given) go to: the one above their
+    staging folder (None: nothing staged and no staging folder named)."""
+    folders = {path.parent for path in staged} | ({Path(staging)} if staging else set())
+    if not folders:
         return None
-    folders = {path.parent for path in staged}
-    if len(folders) != 1 or staged[0].parent.name != STAGING:
+    if len(folders) != 1 or next(iter(folders)).name != STAGING:
         raise ValueError(f"not the files of one staging folder ({STAGING}): {sorted(folders)}")
-    return staged[0].parent.parent
+    return next(iter(folders)).parent
 
 
 def _key(root: Path, path: Path) -> str:

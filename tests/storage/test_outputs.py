@@ -526,3 +526,18 @@ def test_a_killed_seal_writes_temporary_is_removed_by_the_next_seal_ahead(sample
         publish_figures(out, [staging / "metrics.csv"])
     assert not leftover.exists()
     assert_complete(out)
+
+
+def test_figures_removed_with_nothing_staged_are_removed_and_resealed(sampled, tmp_path):
+    """An analysis that writes nothing but must remove stale files: their removal is sealed
+    ahead (as None) and resealed."""
+    out = copy_of(sampled, tmp_path)
+    analyse(out, close_figures=True)
+    gone = ["claims_robust.csv", "claims_nominal_robust.md"]
+    with staging_folder(out / "figures") as staging:
+        assert publish_figures(out, [], removed=gone, staging=staging) == []
+    assert not any((out / "figures" / name).exists() for name in gone)
+    sealed = json.loads((out / SEAL_NAME).read_text())["figures"]["files"]
+    assert not any(f"figures/{name}" in sealed for name in gone)
+    assert "figures/summary.csv" in sealed
+    assert_complete(out)
