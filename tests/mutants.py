@@ -328,7 +328,7 @@ MUTANTS = [
     ),
     Mutant(
         OUTPUTS,
-        "    seal_outputs_ahead(root, figures=ahead)",
+        "    seal_outputs_ahead(root, figures=ahead, inputs=inputs)",
         "    pass",
         "analyse renames its figures into place without sealing them ahead",
     ),
@@ -417,6 +417,12 @@ MUTANTS = [
         "folder = _target(staged, staging)",
         "folder = _target(staged)",
         "an analysis that writes nothing does not remove the files it no longer makes",
+    ),
+    Mutant(
+        DIGESTS_WRITE,
+        "drawn = figures_inputs or inputs_digest(seal)",
+        "drawn = inputs_digest(seal)",
+        "figures are sealed as drawn from the trials at the seal, not those the analysis loaded",
     ),
     # --- judging: how often, and what a judged policy is described from
     Mutant(DDPG, "candidate &= crossed", "candidate = candidate", "judge_every is ignored"),

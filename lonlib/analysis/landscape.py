@@ -14,6 +14,7 @@ import pandas as pd
 
 from lonlib.config import ExperimentConfig
 from lonlib.lon.graphs import build_lon, sinks
+from lonlib.storage.digests import loaded_inputs
 from lonlib.storage.layout import stored_config
 from lonlib.storage.trials import read_finished_trials
 
@@ -64,6 +65,10 @@ class StoredExperiment:
     config: ExperimentConfig
     trials: pd.DataFrame
     fitness_tolerance: float = 1e-9
+    inputs: str | None = None
+    """The digest of the trials as loaded (:func:`lonlib.storage.digests.loaded_inputs`):
+    what the figures drawn from them are sealed as drawn from (None: the trials as sealed
+    when the figures are)."""
 
     @classmethod
     def load(cls, folder: str | Path, fitness_tolerance: float = 1e-9) -> StoredExperiment:
@@ -71,7 +76,7 @@ class StoredExperiment:
         folder = Path(folder)
         trials = read_finished_trials(folder)
         config = stored_config(folder)
-        return cls(folder, config, trials, fitness_tolerance)
+        return cls(folder, config, trials, fitness_tolerance, loaded_inputs(folder, trials))
 
     @cached_property
     def landscapes(self) -> dict[float, Landscape]:

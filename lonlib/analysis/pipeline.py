@@ -142,7 +142,9 @@ def analyse(
         experiment = StoredExperiment.load(experiment, fitness_tolerance)
     with staging_folder(experiment.folder / "figures") as out:  # every file here first
         result, removed = _draw(experiment, out, seed, bins, close_figures, conditioning)
-        result.files = publish_figures(experiment.folder, result.files, removed, staging=out)
+        result.files = publish_figures(
+            experiment.folder, result.files, removed, staging=out, inputs=experiment.inputs
+        )
     return result
 
 

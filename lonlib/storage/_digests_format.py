@@ -303,6 +303,29 @@ def inputs_now(root: Path, seal: Mapping[str, Any]) -> str:
     return inputs_digest({"config": seal.get("config"), "runs": sealed_runs(root)})
 
 
+def loaded_inputs(root: Path, trials: pd.DataFrame) -> str | None:
+    """:func:`inputs_digest` of the trials a reader just loaded from sealed ``root`` (its
+    trials tables, after its seal check): per run, as many trials as it read, by their chain
+    (read after the tables, so a trial a session seals meanwhile is not counted), so that
+    figures drawn from them are sealed as drawn from them. None in an unsealed folder."""
+    from lonlib.storage.layout import read_manifest, run_dir
+
+    root = Path(root)
+    if not is_sealed(root):
+        return None
+    runs = {}
+    for (p, run), count in trials.groupby(["p", "run"]).size().items():
+        folder = run_dir(root, float(p), int(run))
+        path = folder / RUN_DIGESTS
+        entries = read_run(path)[0] if path.is_file() else []
+        if len(entries) >= count:  # else not all sealed: drawn from no sealed state (stale)
+            runs[run_key(folder, root)] = {
+                "trials": int(count),
+                "head": entries[count - 1]["chain"],
+            }
+    return inputs_digest({"config": config_digest(read_manifest(root)), "runs": runs})
+
+
 def figure_files(root: Path) -> list[Path]:
     """The files of an experiment's figures folder that its seal covers: all but the 3-D
     LON's HTML pages (kept out of git) and hidden files (temporaries)."""
@@ -363,6 +386,7 @@ __all__ = [
     "inputs_digest",
     "inputs_now",
     "is_sealed",
+    "loaded_inputs",
     "read_run",
     "read_seal",
     "result_path_versions",

@@ -155,6 +155,7 @@ def write_root(
     next_manifest: Mapping[str, Any] | None = None,
     figures_ahead: Mapping[str, str | None] | None = None,
     recordings_ahead: Mapping[str, Mapping[str, Any]] | None = None,
+    figures_inputs: str | None = None,
 ) -> None:
     """Write the root seal from the runs' chains as they are now, the manifest's
     configuration, and (given) the recordings index (file name → its trial's ``p``, ``run``,
@@ -166,8 +167,10 @@ def write_root(
     ``figures_ahead`` (name → the digest of its new content, None: to be removed) and
     ``recordings_ahead`` (the index the recordings folder is about to hold, each with its
     ``sha256``): outputs sealed ahead of their renames (:func:`seal_outputs_ahead`); the
-    figures or recordings given later settle them. The caller holds the manifest lock and
-    has checked what it read."""
+    figures or recordings given later settle them. ``figures_inputs``: the digest of the
+    trials the figures (written or sealed ahead) were drawn from, as the analysis loaded
+    them (:func:`lonlib.storage.digests.loaded_inputs`; None: the trials as sealed now). The
+    caller holds the manifest lock and has checked what it read."""
     root = Path(root)
     old = read_seal(root / SEAL_NAME) if is_sealed(root) else {}
     seal: dict[str, Any] = {
@@ -198,16 +201,17 @@ def write_root(
         seal["recordings_next"] = {n: dict(info) for n, info in sorted(recordings_ahead.items())}
     elif recordings is None and "recordings_next" in old:
         seal["recordings_next"] = old["recordings_next"]
+    drawn = figures_inputs or inputs_digest(seal)
     if figures is not None:
         seal["figures"] = _figures_seal(
-            root, inputs_digest(seal), old.get("figures"), figures, stale_figures or {}
+            root, drawn, old.get("figures"), figures, stale_figures or {}
         )
     elif "figures" in old:
         seal["figures"] = old["figures"]
     if figures_ahead is not None:  # what an earlier one left sealed ahead and in place, settled
         seal["figures"] = {
             **_settled_figures(root, seal.get("figures", {"files": {}})),
-            "next": {"inputs": inputs_digest(seal), "files": dict(sorted(figures_ahead.items()))},
+            "next": {"inputs": drawn, "files": dict(sorted(figures_ahead.items()))},
         }
     write_seal(root / SEAL_NAME, seal)
 
@@ -316,13 +320,15 @@ def reseal_outputs(
     figures: Iterable[Path] | None = None,
     recordings: Mapping[str, Mapping[str, Any]] | None = None,
     stale_figures: Mapping[str, str | None] | None = None,
+    inputs: str | None = None,
 ) -> bool:
     """After ``lonlib analyse`` (``figures``: the files it wrote; its HTML pages, kept out of
     git, are left out; the earlier figures still there are kept, :func:`write_root`) or
     ``lonlib record`` (``recordings``: the index of every recording in the folder): their
     digests in the root seal, under the manifest lock. ``stale_figures``: figures not drawn
-    from the trials as they are (``lonlib verify --seal``, :func:`stale_figures`). Nothing
-    in an unsealed folder (returns False)."""
+    from the trials as they are (``lonlib verify --seal``, :func:`stale_figures`).
+    ``inputs``: the digest of the trials the figures were drawn from, as loaded (None: as
+    sealed now). Nothing in an unsealed folder (returns False)."""
     from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
     from lonlib.storage.lock import exclusive_lock
 
@@ -337,6 +343,7 @@ def reseal_outputs(
             recordings=recordings,
             figures=kept,
             stale_figures=stale_figures,
+            figures_inputs=inputs,
         )
     return True
 
@@ -346,16 +353,18 @@ def seal_outputs_ahead(
     *,
     figures: Mapping[str, str | None] | None = None,
     recordings: Mapping[str, Mapping[str, Any]] | None = None,
+    inputs: str | None = None,
 ) -> bool:
     """Before ``lonlib analyse`` or ``lonlib record`` puts its outputs in place (each file
     written under a temporary name first, then renamed): ``figures`` (name relative to the
-    root → the digest of its new content, None for a figure it removes) or ``recordings``
-    (the index the recordings folder will hold, each entry with its ``sha256``) sealed
-    ahead in the root, under the manifest lock, so that a kill between two renames, or
-    before the reseal (:func:`reseal_outputs`) that settles them, leaves every file
-    accepted as sealed or as sealed ahead (pending, never tampered). What a killed write of
-    the root left (``.seal.json.<random>.tmp``) is removed first. Nothing in an unsealed
-    folder (returns False)."""
+    root → the digest of its new content, None for a figure it removes; ``inputs``: the
+    digest of the trials they were drawn from, as loaded, None: as sealed now) or
+    ``recordings`` (the index the recordings folder will hold, each entry with its
+    ``sha256``) sealed ahead in the root, under the manifest lock, so that a kill between
+    two renames, or before the reseal (:func:`reseal_outputs`) that settles them, leaves
+    every file accepted as sealed or as sealed ahead (pending, never tampered). What a
+    killed write of the root left (``.seal.json.<random>.tmp``) is removed first. Nothing
+    in an unsealed folder (returns False)."""
     from lonlib.storage.layout import MANIFEST_LOCK, read_manifest
     from lonlib.storage.lock import exclusive_lock
 
@@ -364,7 +373,13 @@ def seal_outputs_ahead(
         return False
     with exclusive_lock(root / MANIFEST_LOCK, record_holder=False):
         remove_temporary_files(root, SEAL_NAME)  # every write of the root holds this lock
-        write_root(root, read_manifest(root), figures_ahead=figures, recordings_ahead=recordings)
+        write_root(
+            root,
+            read_manifest(root),
+            figures_ahead=figures,
+            recordings_ahead=recordings,
+            figures_inputs=inputs,
+        )
     return True
 
 

@@ -73,6 +73,7 @@ from lonlib.storage._digests_format import (
     figure_files,
     file_digest,
     is_sealed,
+    loaded_inputs,
     row_digests,
 )
 from lonlib.storage._digests_write import (
@@ -107,6 +108,7 @@ __all__ = [
     "figure_files",
     "file_digest",
     "is_sealed",
+    "loaded_inputs",
     "mark_sealed",
     "refresh_root",
     "reseal_files",

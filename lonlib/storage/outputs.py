@@ -82,13 +82,16 @@ def publish_figures(
     removed: Iterable[str] = (),
     *,
     staging: Path | None = None,
+    inputs: str | None = None,
 ) -> list[Path]:
     """Put the figures and tables ``staged`` (files of :func:`staging_folder`'s folder,
     ``staging``, which names it when nothing is staged) in place in the folder above it,
     and remove those named ``removed`` (file names there that this analysis no longer
     makes), sealed ahead and resealed in a sealed experiment ``root`` (see the module
-    docstring): their final paths, in the order given (each once). The 3-D LON's HTML
-    pages are put in place too, not sealed (kept out of git)."""
+    docstring; ``inputs``: the digest of the trials they were drawn from, as the analysis
+    loaded them, :func:`lonlib.storage.digests.loaded_inputs`; None: the trials as sealed
+    now): their final paths, in the order given (each once). The 3-D LON's HTML pages are
+    put in place too, not sealed (kept out of git)."""
     root, staged = Path(root), list(dict.fromkeys(Path(p) for p in staged))
     folder = _target(staged, staging)
     if folder is None:
@@ -105,9 +108,9 @@ def publish_figures(
         if path.suffix != ".html"
     }
     ahead.update({_key(root, folder / name): None for name in gone})
-    seal_outputs_ahead(root, figures=ahead)
+    seal_outputs_ahead(root, figures=ahead, inputs=inputs)
     _rename(staged, folder, gone)
-    reseal_outputs(root, figures=final)
+    reseal_outputs(root, figures=final, inputs=inputs)
     shutil.rmtree(folder / STAGING, ignore_errors=True)
     return final
 

@@ -656,6 +656,28 @@ def test_figures_drawn_from_earlier_trials_stay_stale_until_analysed_again(other
     assert stale_note(analysed) == "" and "inputs_of" not in sealed_figures(analysed)
 
 
+def test_figures_are_sealed_as_drawn_from_the_trials_the_analysis_loaded(other, tmp_path):
+    """A session appends a trial to each run between the analysis's load of the trials and
+    its seal: the figures are sealed as drawn from the trials it loaded (stale, a warning),
+    not from those the runs' chains hold at the seal."""
+    from lonlib.analysis.landscape import StoredExperiment
+    from lonlib.analysis.pipeline import analyse
+    from lonlib.storage._digests_format import inputs_now
+
+    out = tmp_path / "out"
+    shutil.copytree(other[1], out)
+    experiment = StoredExperiment.load(out)
+    loaded = inputs_now(out, json.loads((out / SEAL_NAME).read_text()))
+    more_trials(out, other[0])
+    analyse(experiment, close_figures=True, conditioning=False)
+    figures = sealed_figures(out)
+    assert figures["inputs"] == loaded and "inputs_of" not in figures
+    assert loaded != inputs_now(out, json.loads((out / SEAL_NAME).read_text()))
+    listed = len(figures["files"])
+    assert stale_note(out).startswith(f"{listed} of {listed} figures and tables")
+    assert verify_experiment(out, recordings=False).errors == []
+
+
 CHANGE_POINTS = [
     (SEAL_NAME, 1),  # the root sealed ahead of the manifest with the changed setting
     ("manifest.json", 1),  # the manifest written, the root not yet
