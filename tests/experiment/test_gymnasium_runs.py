@@ -238,7 +238,7 @@ def test_an_environment_failing_in_a_lockstep_batch_names_its_run(tmp_path, monk
         )
     text = str(error.value)
     assert text.startswith("run (p=0.001, run=0), local search 1: local search: ")
-    assert "non-finite observation at step (step 3)" in text and "1 stored" in text
+    assert "non-finite observation at step 3:" in text and "1 stored" in text
     np.testing.assert_array_equal(read_experiment_trials(out)["fitness"], before["fitness"])
 
 
