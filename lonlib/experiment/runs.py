@@ -109,7 +109,9 @@ def check_task_descriptor(config: ExperimentConfig, out: Path) -> None:
     columns = stored_trial_columns(out) if same_task else None  # else the session refuses it
     if columns is not None and behaviour_names(columns) != names:
         raise ValueError(
-            _changed_names(config, names, behaviour_names(columns), "the stored trials")
+            _changed_names(
+                config.task.descriptor, names, behaviour_names(columns), "the stored trials"
+            )
         )
 
 
@@ -132,16 +134,14 @@ def check_behaviour_columns(
         stored, whose = behaviour_names(columns), "the experiment's stored trials"
     if names != stored:
         raise ValueError(
-            f"run (p={p:g}, run={run}): {_changed_names(config, names, stored, whose)}"
+            f"run (p={p:g}, run={run}): "
+            + _changed_names(config.task.descriptor, names, stored, whose)
         )
 
 
-def _changed_names(
-    config: ExperimentConfig, names: list[str], stored: list[str], whose: str
-) -> str:
-    assert config.task is not None
+def _changed_names(descriptor: str, names: list[str], stored: list[str], whose: str) -> str:
     return (
-        f"task.descriptor ({config.task.descriptor or 'none'}) now gives the columns {names}, "
+        f"task.descriptor ({descriptor or 'none'}) now gives the columns {names}, "
         f"{whose} have {stored}: every optimum of an experiment needs the same ones (did the "
         "descriptor change? restore it, or sample into a new folder); nothing stored"
     )
