@@ -56,6 +56,8 @@ DEVICES = "lonlib/ddpg/devices.py"
 KERNELS = "lonlib/task/kernels.py"
 GYM_DDPG = "lonlib/ddpg/gymnasium_search.py"
 GYM_BEHAVIOUR = "lonlib/task/gymnasium_behaviour.py"
+GYM_DESCRIPTORS = "lonlib/task/gymnasium_descriptors.py"
+RUNS = "lonlib/experiment/runs.py"
 DIGESTS_FORMAT, DIGESTS_WRITE = (
     "lonlib/storage/_digests_format.py",
     "lonlib/storage/_digests_write.py",
@@ -135,7 +137,11 @@ GUARDS = {
         *ONE_ROLLOUT,
         "tests/calibration/test_calibration.py",
     ],
-    VERIFY: ["tests/analysis/test_verify.py", "tests/experiment/test_gymnasium_runs.py"],
+    VERIFY: [
+        "tests/analysis/test_verify.py",
+        "tests/experiment/test_gymnasium_runs.py",
+        "tests/analysis/test_verify_task.py",
+    ],
     JUDGED_LOG: ["tests/calibration/test_study.py"],
     HOLDING: ["tests/analysis/test_holding.py", "tests/analysis/test_verify.py"],
     POWER: ["tests/analysis/test_claims_power.py"],
@@ -151,6 +157,8 @@ GUARDS = {
         "tests/task/test_gymnasium_behaviour.py",
         "tests/experiment/test_gymnasium_runs.py",
     ],
+    GYM_DESCRIPTORS: ["tests/task/test_gymnasium_descriptors.py"],
+    RUNS: ["tests/experiment/test_gymnasium_runs.py"],
     TRIALS: ["tests/storage/test_digests.py"],
     SESSION: ["tests/storage/test_digests.py"],
 }
@@ -1269,8 +1277,10 @@ MUTANTS = [
     ),
     Mutant(
         VERIFY,
-        "report.findings.extend(_check_task_descriptor(task, row, theta, severity, differs))",
-        "report.findings.extend([])",
+        "report.findings.extend(\n"
+        "                _check_task_descriptor(task, row, theta, severity, behaviour_differs)\n"
+        "            )",
+        "pass",
         "verify: a Gymnasium task's stored behaviour is not replayed",
     ),
     Mutant(
@@ -1291,6 +1301,158 @@ MUTANTS = [
         "        if not isinstance(number, (int, float)) or not math.isfinite(float(number)):",
         "        if not isinstance(number, (int, float)):",
         "Gymnasium descriptor: a NaN value is stored",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "search.steps // hp.judge_every > previous_end // hp.judge_every",
+        "search.steps // hp.judge_every >= previous_end // hp.judge_every",
+        "Gymnasium DDPG: with judge_every, every episode's end is judged",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "                last_improvement=hp.warmup_steps,",
+        "                last_improvement=0,",
+        "Gymnasium DDPG: the patience window opens at step 0, before anything is judged",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "                search.last_improvement = max(search.steps, hp.warmup_steps)",
+        "                pass",
+        "Gymnasium DDPG: an improvement does not restart the patience",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "                result.theta, result.omega, result.final_evaluation = actor, critic, True",
+        "                result.final_evaluation = True",
+        "Gymnasium DDPG: a search that judged nothing returns its start, not its trained Actor",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "                    result.fitness = self._greedy(actor)[0]",
+        "                    result.fitness = result.start_fitness",
+        "Gymnasium DDPG: a search that judged nothing is given its start's fitness",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "            self.envs[slot].renew()",
+        "            pass",
+        "Gymnasium DDPG: a refilled slot trains in the environment the last search used",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "            search.episode_return += float(rewards[slot])",
+        "            search.episode_return = float(rewards[slot])",
+        "Gymnasium DDPG: the history's episode return is its last reward",
+    ),
+    Mutant(
+        GYM_DDPG,
+        "        search.losses = []",
+        "        pass",
+        "Gymnasium DDPG: the history's losses average every episode so far",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    up = cos[1:] >= UPRIGHT_COS",
+        "    up = cos[1:] > UPRIGHT_COS",
+        "Pendulum-v1 descriptor: exactly 20 degrees from upright is not up",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    up = cos[1:] >= UPRIGHT_COS",
+        "    up = cos[:-1] >= UPRIGHT_COS",
+        "Pendulum-v1 descriptor: reset's observation counts, the last step's does not",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    last = up[-max(1, len(up) // 4) :]",
+        "    last = up[-(len(up) // 4) :]",
+        "Pendulum-v1 descriptor: an episode under 4 steps has no last quarter (the whole one)",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    if last.all():",
+        "    if last.any():",
+        "Pendulum-v1 descriptor: up once in the last quarter counts as holding",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    elif abs(turns) >= 2:",
+        "    elif turns >= 2:",
+        "Pendulum-v1 descriptor: spinning one way only",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    elif abs(turns) >= 2:",
+        "    elif abs(turns) >= 3:",
+        "Pendulum-v1 descriptor: spinning from three turns",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        '    if last.all():\n        label = "swings up and holds"\n'
+        '    elif abs(turns) >= 2:\n        label = "spins"',
+        '    if abs(turns) >= 2:\n        label = "spins"\n'
+        '    elif last.all():\n        label = "swings up and holds"',
+        "Pendulum-v1 descriptor: spinning outranks holding at the end",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    if position.max() >= MOUNTAIN_CAR_GOAL:",
+        "    if position.max() > MOUNTAIN_CAR_GOAL:",
+        "Mountain car descriptor: exactly at the goal is not reaching it",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    elif fuel < STAY_PUT_FUEL:",
+        "    elif fuel <= STAY_PUT_FUEL:",
+        "Mountain car descriptor: one unit of fuel still stays put",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        "    fuel = float(np.sum(trace.actions**2))",
+        "    fuel = float(np.sum(np.abs(trace.actions)))",
+        "Mountain car descriptor: fuel is not the squared actions the reward charges",
+    ),
+    Mutant(
+        GYM_DESCRIPTORS,
+        '        "position_range": float(position.max() - position.min()),',
+        '        "position_range": float(position.max() - position[1:].min()),',
+        "Mountain car descriptor: the range leaves out where reset put the car",
+    ),
+    Mutant(
+        VERIFY,
+        "math.isclose(float(stored), replayed, rel_tol=tolerance, abs_tol=tolerance)",
+        "math.isclose(float(stored), replayed, rel_tol=0.0, abs_tol=tolerance)",
+        "verify: a b_* value replayed elsewhere within an absolute tolerance only",
+    ),
+    Mutant(
+        VERIFY,
+        "        report.findings.extend(_undescribed_behaviour(rows, mismatch))",
+        "        pass",
+        "verify: behaviour stored under no descriptor is not reported",
+    ),
+    Mutant(
+        VERIFY,
+        "    report.descriptor_checked = False",
+        "    pass",
+        "verify: a descriptor that does not import leaves the verification complete",
+    ),
+    Mutant(
+        RUNS,
+        "    if names != stored:",
+        "    if False:",
+        "a run's trial is saved with other behaviour columns than its stored trials",
+    ),
+    Mutant(
+        RUNS,
+        "        columns = stored_trial_columns(out, skip=trials_path(out, p, run))",
+        "        columns = None",
+        "a new run's first trial is saved with other behaviour columns than the other runs'",
+    ),
+    Mutant(
+        RUNS,
+        "    if columns is not None and behaviour_names(columns) != names:",
+        "    if False:",
+        "a session starts with a descriptor whose names the stored trials do not have",
     ),
 ]
 

@@ -4,6 +4,7 @@ recording, and a Gymnasium task's trials; exact comparisons (NaN equal to NaN)."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -57,8 +58,10 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
     """A Gymnasium task's trials: every stored Actor's greedy episode replayed
     (:meth:`lonlib.task.gymnasium_task.GymnasiumTask.fitness`) and every start rebuilt; exact
     where :func:`task_replays_exactly`, else within :data:`TASK_REPLAY_TOLERANCE` (a
-    difference beyond it is then a warning)."""
-    task = task_of(config)
+    difference beyond it is then a warning). A descriptor whose module does not import here
+    is one warning naming it (the report then says the verification is incomplete), and
+    every fitness is replayed all the same."""
+    config, task = _replayable_task(config, report)
     exact = task_replays_exactly(folder, config)
     severity = mismatch if exact else "warning"
     report.findings.append(
@@ -83,6 +86,16 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
             return not _same(stored, replayed)
         return not (_number(stored) and abs(float(stored) - replayed) <= TASK_REPLAY_TOLERANCE)
 
+    def behaviour_differs(stored: float, replayed: float) -> bool:
+        """A ``b_*`` value is on the descriptor's own scale: relative and absolute tolerance."""
+        if exact:
+            return not _same(stored, replayed)
+        tolerance = TASK_REPLAY_TOLERANCE
+        return not (
+            _number(stored)
+            and math.isclose(float(stored), replayed, rel_tol=tolerance, abs_tol=tolerance)
+        )
+
     thetas, rows = stored_actors(folder, trials, config, report, mismatch, task.actor_spec.n_params)
     for row, theta in zip(rows, thetas, strict=True):
         replayed = float(task.fitness(theta[None])[0])
@@ -98,7 +111,9 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
                 )
             )
         if task.config.descriptor:
-            report.findings.extend(_check_task_descriptor(task, row, theta, severity, differs))
+            report.findings.extend(
+                _check_task_descriptor(task, row, theta, severity, behaviour_differs)
+            )
         report.replayed += 1
     if task.config.descriptor:
         report.findings.append(
@@ -111,6 +126,8 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
                 f"{task.config.descriptor}: every stored behaviour replayed from its Actor",
             )
         )
+    elif report.descriptor_checked:
+        report.findings.extend(_undescribed_behaviour(rows, mismatch))
     for row, start in _rebuilt_starts(folder, config, trials, task.actor_spec.n_params):
         replayed = float(task.fitness(start[None])[0])
         if differs(row["start_fitness"], replayed):
@@ -126,6 +143,60 @@ def verify_task_trials(folder: Path, config, trials: pd.DataFrame, report, misma
                 )
             )
         report.starts += 1
+
+
+def _replayable_task(config: Any, report: VerifyReport) -> tuple[Any, Any]:
+    """The configuration and task whose trials are replayed: ``config``'s, or, when its
+    descriptor's module does not import here, the same without the descriptor, with a
+    warning naming it (the stored behaviour is then not replayed, and the report is
+    incomplete)."""
+    try:
+        return config, task_of(config)
+    except ValueError as error:
+        if not (config.task.descriptor and str(error).startswith("task.descriptor")):
+            raise
+        unimported = str(error)
+    report.descriptor_checked = False
+    report.findings.append(
+        Finding(
+            "warning",
+            "descriptor",
+            None,
+            None,
+            None,
+            f"{unimported}: the stored behaviour (b_*, label) is not replayed; every fitness is. "
+            "Install that module (or put it on PYTHONPATH) and verify again",
+        )
+    )
+    bare = dataclasses.replace(config, task=dataclasses.replace(config.task, descriptor=""))
+    return bare, task_of(bare)
+
+
+def _undescribed_behaviour(rows: list[dict], severity: str) -> list[Finding]:
+    """Behaviour (``b_*``, ``label``) stored for trials of a task whose configuration names
+    no descriptor: nothing can replay it (one finding)."""
+    stored = sorted(
+        {
+            name
+            for row in rows
+            for name, value in row.items()
+            if (name.startswith(PREFIX) or name == "label")
+            and (isinstance(value, str) or _number(value))
+        }
+    )
+    if not stored:
+        return []
+    return [
+        Finding(
+            severity,
+            "descriptor",
+            None,
+            None,
+            None,
+            f"{', '.join(stored)} stored but not replayed: the configuration names no "
+            "task.descriptor",
+        )
+    ]
 
 
 def _check_task_descriptor(

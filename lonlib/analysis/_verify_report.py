@@ -38,6 +38,7 @@ class VerifyReport:
     current_version: bool = True  # every session ran the current result-path version
     sealed: bool = True  # the folder has a seal (lonlib.storage.digests)
     recordings_checked: bool = True  # the recordings were replayed and their index checked
+    descriptor_checked: bool = True  # a Gymnasium task's descriptor imported (its b_* replayed)
     findings: list[Finding] = field(default_factory=list)
 
     @property
@@ -54,6 +55,13 @@ class VerifyReport:
     def ok(self) -> bool:
         """True when no check failed (warnings allowed)."""
         return not self.errors
+
+    @property
+    def complete(self) -> bool:
+        """True when every stored number could be replayed: False when a Gymnasium task's
+        descriptor does not import here (its stored behaviour is then unchecked; a warning
+        says why). ``lonlib verify`` fails an incomplete verification."""
+        return self.descriptor_checked
 
     def counts(self) -> Counter:
         """Findings by (severity, check)."""
@@ -74,7 +82,15 @@ class VerifyReport:
             lines.append(f"unsealed: `lonlib verify {self.folder} --seal` seals it if it verifies")
         for (severity, check), count in sorted(self.counts().items()):
             lines.append(f"  {severity}s [{check}]: {count}")
-        lines.append("verify: OK" if self.ok else f"verify: FAILED ({len(self.errors)} errors)")
+        if not self.ok:
+            lines.append(f"verify: FAILED ({len(self.errors)} errors)")
+        elif not self.complete:
+            lines.append(
+                "verify: INCOMPLETE (no error, but the stored behaviour was not replayed: its "
+                "task.descriptor does not import here)"
+            )
+        else:
+            lines.append("verify: OK")
         return "\n".join(lines)
 
 

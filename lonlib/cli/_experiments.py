@@ -25,6 +25,7 @@ from lonlib.util.validation import check_range
 def run_verb(args: argparse.Namespace) -> None:
     """``lonlib run``: run (or resume) an experiment."""
     from lonlib.config import load_config
+    from lonlib.experiment.lockstep import CHECKPOINT_SECONDS
     from lonlib.experiment.running import pending_runs, run_experiment
 
     config = load_config(args.config)
@@ -38,8 +39,17 @@ def run_verb(args: argparse.Namespace) -> None:
     if changes:
         config = dataclasses.replace(config, **changes)  # validated again on construction
     out = Path(args.out) if args.out else Path("data") / config.name
-    if args.checkpoint_minutes != 0:  # a write takes ~11 MB per slot: not every few steps
-        check_range("checkpoint_minutes (0 for never)", args.checkpoint_minutes, 1.0, 1e7)
+    minutes = args.checkpoint_minutes
+    if minutes is None:
+        minutes = CHECKPOINT_SECONDS / 60
+    if minutes != 0:  # a write takes ~11 MB per slot: not every few steps
+        check_range("checkpoint_minutes (0 for never)", minutes, 1.0, 1e7)
+    if args.checkpoint_minutes is not None and config.task is not None:
+        print(
+            "lonlib: warning: --checkpoint-minutes does not apply to a Gymnasium task: its "
+            "lockstep batch is not checkpointed (an interrupted search re-runs from its start)",
+            file=sys.stderr,
+        )
     if args.dry_run:
         _dry_run_experiment(config, out, args)
         return
@@ -51,7 +61,7 @@ def run_verb(args: argparse.Namespace) -> None:
         progress=not args.quiet,
         executor=args.executor,
         slots=args.slots,
-        checkpoint_seconds=args.checkpoint_minutes * 60 if args.checkpoint_minutes else None,
+        checkpoint_seconds=minutes * 60 if minutes else None,
         drain_after_seconds=None if args.drain_after is None else args.drain_after * 60,
         allow_changes=args.allow_change or (),
     )
@@ -86,6 +96,7 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     )
     from lonlib.experiment.executors import resolve_executor, session_executor
     from lonlib.experiment.lockstep import check_drain, check_lockstep
+    from lonlib.experiment.runs import check_task_descriptor
     from lonlib.sb3 import check_search
     from lonlib.storage.digests import check_readable
     from lonlib.storage.layout import read_manifest
@@ -98,23 +109,21 @@ def _dry_run_experiment(config, out: Path, args: argparse.Namespace) -> None:
     )
     slots = config.slots if args.slots is None else args.slots
     check_range("slots", slots, 1, 100_000)
+    # what the session uses, checked as the run checks it (lockstep refuses an SB3 search)
+    config = dataclasses.replace(config, executor=kind, slots=slots)
     check_device(config.ddpg.device)
     if config.task is not None:
         check_search(config.task.search, config.ddpg.device)
     if kind == "lockstep":
         check_lockstep(config.ddpg, slots)
     check_drain(kind, None if args.drain_after is None else args.drain_after * 60)
-    sized = dataclasses.replace(config, slots=slots)
-    searches = concurrent_searches(sized, kind, args.workers, args.scheduler)
-    check_memory(sized, searches)
+    searches = concurrent_searches(config, kind, args.workers, args.scheduler)
+    check_memory(config, searches)
+    check_task_descriptor(config, out)
     state = check_output_folder(out)
     if state == "exists" and manifest_path(out).exists():
         check_readable(out, read_manifest(out), "lonlib run")  # what a resume checks first
-        manifest = updated_manifest(
-            dataclasses.replace(config, executor=kind, slots=slots),
-            out,
-            allow_changes=args.allow_change or (),
-        )
+        manifest = updated_manifest(config, out, allow_changes=args.allow_change or ())
         state = "resumes the experiment stored there" + "".join(
             f", changing {key} from {old} to {new}"
             for key, (old, new) in manifest["sessions"][-1].get("changed", {}).items()

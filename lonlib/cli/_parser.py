@@ -100,9 +100,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--checkpoint-minutes",
         type=float,
-        default=10.0,
         help="lockstep: write the batch in flight this often, to resume mid-search after a "
-        "kill (at least 1; 0: never write nor resume one; default 10)",
+        "kill (at least 1; 0: never write nor resume one; default 10; a Gymnasium task's "
+        "batch is not checkpointed)",
     )
     run.add_argument(
         "--drain-after",

@@ -169,11 +169,23 @@ class GymnasiumSlotTrainer:
             task.actor_spec, task.critic_spec, thetas, omegas, hp, self.device
         )
         self.replay = ReplayBuffer(k, hp.buffer_size, task.obs_size, task.action_size, self.device)
-        self.envs = [_TrainingEnv(task) for _ in range(k)]
-        self.vector = _vector_env(self.envs)
         self.searches: list[_Search | None] = [None] * k
         self.busy = np.zeros(k, dtype=bool)
-        self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
+        self.envs: list[_TrainingEnv] = []
+        self.closed = False
+        try:  # an environment that fails while the batch is made is closed with the others
+            self.envs.extend(_TrainingEnv(task) for _ in range(k))
+            self.vector = _vector_env(self.envs)
+            self._start(list(range(k)), thetas, omegas, seeds, list(tags or range(k)))
+        except BaseException:
+            self.close()
+            raise
+
+    def __enter__(self) -> GymnasiumSlotTrainer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ slots
     @property
@@ -425,7 +437,11 @@ class GymnasiumSlotTrainer:
         self.vector = _vector_env(self.envs)
 
     def close(self) -> None:
-        """Close every slot's environment."""
+        """Close every slot's environment (once; the trainer is done with then). The
+        trainer is a context manager that closes them however its block ends."""
+        if self.closed:
+            return
+        self.closed = True
         for env in self.envs:
             env.env.close()
 
@@ -455,16 +471,14 @@ def gymnasium_local_search(
     """``F(theta, omega, e, h)`` on a Gymnasium task: DDPG from the given Actor and Critic
     (targets copied from them, an empty replay buffer); the best judged policy and its
     fitness. A batch of one :class:`GymnasiumSlotTrainer` slot."""
-    trainer = GymnasiumSlotTrainer(task, theta[None], omega[None], [seed], hp)
     try:
-        while True:
-            ended = trainer.step()
-            if ended:
-                return ended[0][1]
+        with GymnasiumSlotTrainer(task, theta[None], omega[None], [seed], hp) as trainer:
+            while True:
+                ended = trainer.step()
+                if ended:
+                    return ended[0][1]
     except SlotEnvironmentError as error:
         raise TaskEnvironmentError(str(error)) from None
-    finally:
-        trainer.close()
 
 
 __all__ = ["GymnasiumSlotTrainer", "SlotEnvironmentError", "gymnasium_local_search"]

@@ -49,6 +49,7 @@ from lonlib.experiment.checkpoints import (
     save_inflight,
 )
 from lonlib.experiment.runs import (
+    check_behaviour_columns,
     experiment_plan,
     experiment_task,
     open_run,
@@ -160,7 +161,9 @@ class LockstepBatch:
         self.active: dict[Job, _Run] = {}
 
         self.deferred: list[Job] = []  # runs another process holds, waited for once the batch ends
-        self.owner = ExitStack()  # the lock of the batch's checkpoint, held while the batch trains
+        # the lock of the batch's checkpoint, held while the batch trains (and a Gymnasium
+        # batch's environments, closed when it ends)
+        self.owner = ExitStack()
 
     def lock_and_open(self, job: Job, block: bool) -> _Run:
         """Run ``job`` locked, its driver resumed from storage (raises LockHeld)."""
@@ -345,6 +348,8 @@ class LockstepBatch:
             with self.naming_runs():
                 trainer = self.new_trainer(first)
             checkpoint, checkpoint_written = None, time.monotonic()
+        if isinstance(trainer, GymnasiumSlotTrainer):  # its environments, however it ends
+            self.owner.callback(trainer.close)
         self.start_first = False  # the first fill is over: the drain time holds from here
         last_tick, steps_at_tick = time.monotonic(), 0
         steps = 0
@@ -369,7 +374,9 @@ class LockstepBatch:
                     done = len(run.driver.state.trials)
                     raise run_failure(run.p, run.run, done, error) from None
                 run.driver.record(run.request, optimum, result.seconds)
-                save_step(self.out, run.p, run.run, run.driver.state.trials, optimum)
+                trials = run.driver.state.trials
+                check_behaviour_columns(self.out, self.config, run.p, run.run, trials)
+                save_step(self.out, run.p, run.run, trials, optimum)
                 if run.driver.finished or drained:
                     self.release(tag)  # draining: a later call continues the run
                     run = None if drained else self.open_next()
@@ -413,8 +420,6 @@ class LockstepBatch:
                 yielding = False  # without a checkpoint it would lose its searches
         if checkpoint is not None:
             remove_inflight(checkpoint)  # every run of the batch has ended
-        if isinstance(trainer, GymnasiumSlotTrainer):
-            trainer.close()
 
     def run(self) -> bool:
         """Train until every run has ended (or, past the drain time, until no search is in

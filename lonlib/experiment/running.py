@@ -35,6 +35,8 @@ from lonlib.experiment.executors import execute_runs, resolve_executor, session_
 from lonlib.experiment.lockstep import CHECKPOINT_SECONDS, check_drain, check_lockstep, draining
 from lonlib.experiment.lockstep_workers import run_lockstep_processes
 from lonlib.experiment.runs import (
+    check_behaviour_columns,
+    check_task_descriptor,
     experiment_plan,
     experiment_task,
     hold_runs,
@@ -94,6 +96,7 @@ def _run_locked(out: Path, config: ExperimentConfig, p: float, run: int) -> dict
     driver = open_run(out, config, p, run)
     try:
         for state, _, optimum in driver.steps(experiment_local_search(config)):
+            check_behaviour_columns(out, config, p, run, state.trials)
             save_step(out, p, run, state.trials, optimum)
     except TaskEnvironmentError as error:  # what the run stored before stays
         raise run_failure(p, run, len(driver.state.trials), error) from None
@@ -215,6 +218,7 @@ def run_experiment(
     check_memory(config, concurrent_searches(config, kind, workers, scheduler))  # before any folder
     drain_at = None if drain_after_seconds is None else started + drain_after_seconds
     out = Path(out)
+    check_task_descriptor(config, out)
     check_output_folder(out)
     capability = torch_cpu_capability()
     session = SamplingSession.open(

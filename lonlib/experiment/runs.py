@@ -14,15 +14,17 @@ from lonlib.config import ExperimentConfig
 from lonlib.search.algorithm import (
     BasinHoppingRun,
     RunState,
+    Trial,
     random_networks,
     random_parameters,
 )
-from lonlib.storage.atomic import remove_temporary_files
+from lonlib.storage.atomic import CorruptDataError, remove_temporary_files
 from lonlib.storage.digests import drop_unwritten_trials
 from lonlib.storage.inflight import Plan
-from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config
+from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config, trials_path
 from lonlib.storage.lock import LockHeld, exclusive_lock
-from lonlib.storage.trials import load_run_state
+from lonlib.storage.trials import load_run_state, stored_trial_columns
+from lonlib.task.gymnasium_behaviour import behaviour_names, check_descriptor
 from lonlib.task.gymnasium_task import TaskEnvironmentError
 from lonlib.task.interface import task_of
 
@@ -88,6 +90,60 @@ def run_failure(p: float, run: int, done: int, error: Exception) -> TaskEnvironm
     return TaskEnvironmentError(
         f"run (p={p:g}, run={run}), local search {done}: {error} (its {done} stored "
         "local search(es) are kept)"
+    )
+
+
+def check_task_descriptor(config: ExperimentConfig, out: Path) -> None:
+    """Before any compute and before any folder is made (``lonlib run`` and its
+    ``--dry-run``): a Gymnasium task's descriptor describes a short trace
+    (:func:`lonlib.task.gymnasium_behaviour.check_descriptor`), with the names the trials
+    already stored in ``out`` for this task have; ValueError naming ``task.descriptor``
+    otherwise."""
+    if config.task is None or not config.task.descriptor:
+        return
+    names = check_descriptor(experiment_task(config))
+    try:
+        same_task = stored_config(out).task == config.task
+    except (OSError, CorruptDataError):  # none there yet, or unreadable: the session says so
+        return
+    columns = stored_trial_columns(out) if same_task else None  # else the session refuses it
+    if columns is not None and behaviour_names(columns) != names:
+        raise ValueError(
+            _changed_names(
+                config.task.descriptor, names, behaviour_names(columns), "the stored trials"
+            )
+        )
+
+
+def check_behaviour_columns(
+    out: Path, config: ExperimentConfig, p: float, run: int, trials: Sequence[Trial]
+) -> None:
+    """Before a Gymnasium task's trial is saved: its behaviour columns (``b_*``, ``label``)
+    are those of the run's stored trials (for a run's first trial, another stored run's), or
+    ValueError naming the run and ``task.descriptor``, and nothing is written: a table whose
+    rows have other columns would not verify."""
+    if config.task is None:
+        return
+    names = behaviour_names(trials[-1].behaviour)
+    if len(trials) > 1:
+        stored, whose = behaviour_names(trials[0].behaviour), "the run's stored trials"
+    else:
+        columns = stored_trial_columns(out, skip=trials_path(out, p, run))
+        if columns is None:
+            return
+        stored, whose = behaviour_names(columns), "the experiment's stored trials"
+    if names != stored:
+        raise ValueError(
+            f"run (p={p:g}, run={run}): "
+            + _changed_names(config.task.descriptor, names, stored, whose)
+        )
+
+
+def _changed_names(descriptor: str, names: list[str], stored: list[str], whose: str) -> str:
+    return (
+        f"task.descriptor ({descriptor or 'none'}) now gives the columns {names}, "
+        f"{whose} have {stored}: every optimum of an experiment needs the same ones (did the "
+        "descriptor change? restore it, or sample into a new folder); nothing stored"
     )
 
 

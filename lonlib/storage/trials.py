@@ -168,6 +168,21 @@ def runs_ending_early(
     return early
 
 
+def stored_trial_columns(root: Path, skip: Path | None = None) -> list[str] | None:
+    """The columns of one stored trials table of the experiment in ``root`` (the first run's
+    but ``skip``'s), read from its schema alone; None when no other run is stored."""
+    import pyarrow.parquet as pq
+
+    for path in sorted(Path(root).glob("p=*/run_*/trials.parquet")):
+        if skip is not None and path == Path(skip):
+            continue
+        try:
+            return list(pq.read_schema(io.BytesIO(path.read_bytes())).names)
+        except Exception as error:  # pyarrow raises several types for a damaged file
+            raise CorruptDataError(f"{path}: cannot read the trials table ({error})") from error
+    return None
+
+
 def read_experiment_trials(root: Path) -> pd.DataFrame:
     """All trials of every run of an experiment folder, one table (sorted by p, run, index)."""
     root = Path(root)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -87,14 +87,7 @@ def describe_optimum(
     floats and, if the descriptor gives one, ``label``; empty without a descriptor."""
     if not task.config.descriptor:
         return {}
-    trace = trace_episode(task, theta, where)
-    try:
-        described = task.descriptor(trace)
-    except Exception as error:  # the user's code: one line naming it
-        raise ValueError(
-            f"task.descriptor ({task.config.descriptor}) raised {type(error).__name__}: {error}"
-        ) from None
-    columns = behaviour_columns(described, task.config.descriptor)
+    columns = _described(task, trace_episode(task, theta, where))
     names = sorted(columns)
     if task.descriptor_names is None:
         task.descriptor_names = names
@@ -105,6 +98,36 @@ def describe_optimum(
             f"every optimum: {first} before, now {names}"
         )
     return columns
+
+
+def check_descriptor(task: GymnasiumTask) -> list[str]:
+    """The columns (sorted ``b_<name>`` and ``label``) the task's descriptor gives a short
+    trace, the greedy episode of a random Actor of the task's shape: what a run checks before
+    any compute, so that a descriptor that raises or returns what it may not is one line
+    naming ``task.descriptor`` then, not after the first local search. Empty without a
+    descriptor. The task's :attr:`~GymnasiumTask.descriptor_names` are left to its optima."""
+    if not task.config.descriptor:
+        return []
+    theta = task.actor_spec.initial(np.random.default_rng(0))
+    where = "task.descriptor check, a random Actor's greedy episode"
+    return sorted(_described(task, trace_episode(task, theta, where)))
+
+
+def behaviour_names(columns: Iterable[str]) -> list[str]:
+    """The behaviour columns among a trials table's ``columns`` (or a trial's behaviour
+    keys): ``b_*`` and ``label``, sorted."""
+    return sorted(name for name in columns if name.startswith(PREFIX) or name == "label")
+
+
+def _described(task: GymnasiumTask, trace: EpisodeTrace) -> dict[str, Any]:
+    """The task's descriptor of ``trace`` as checked columns (its error one line)."""
+    try:
+        described = task.descriptor(trace)
+    except Exception as error:  # the user's code: one line naming it
+        raise ValueError(
+            f"task.descriptor ({task.config.descriptor}) raised {type(error).__name__}: {error}"
+        ) from None
+    return behaviour_columns(described, task.config.descriptor)
 
 
 def behaviour_columns(described: Any, name: str) -> dict[str, Any]:
@@ -131,6 +154,8 @@ def behaviour_columns(described: Any, name: str) -> dict[str, Any]:
 __all__ = [
     "EpisodeTrace",
     "behaviour_columns",
+    "behaviour_names",
+    "check_descriptor",
     "describe_optimum",
     "trace_episode",
 ]

@@ -191,19 +191,19 @@ class GymnasiumTask:
     ) -> np.ndarray:
         if not self._spaces_unchanged(env):
             raise TaskEnvironmentError(
-                f"{where}: {self.name} changed its observation or action space at {call} "
-                f"(step {step}); a task's spaces must stay fixed"
+                f"{where}: {self.name} changed its observation or action space "
+                f"{_at(call, step)}; a task's spaces must stay fixed"
             )
         array = np.asarray(observation, dtype=np.float64)
         if array.shape != (self.obs_size,):
             raise TaskEnvironmentError(
-                f"{where}: {self.name} returned an observation of shape {array.shape} at {call} "
-                f"(step {step}), its space says ({self.obs_size},)"
+                f"{where}: {self.name} returned an observation of shape {array.shape} "
+                f"{_at(call, step)}, its space says ({self.obs_size},)"
             )
         if not np.isfinite(array).all():
             raise TaskEnvironmentError(
-                f"{where}: {self.name} returned a non-finite observation at {call} (step "
-                f"{step}): {array.tolist()}"
+                f"{where}: {self.name} returned a non-finite observation {_at(call, step)}: "
+                f"{array.tolist()}"
             )
         return self.observe(array)
 
@@ -221,7 +221,7 @@ class GymnasiumTask:
 
     def _failure(self, where: str, call: str, step: int, error: Exception) -> TaskEnvironmentError:
         return TaskEnvironmentError(
-            f"{where}: {self.name} raised in {call} at step {step}: {type(error).__name__}: "
+            f"{where}: {self.name} raised {_at(call, step)}: {type(error).__name__}: "
             f"{_one_line(error)}"
         )
 
@@ -303,6 +303,11 @@ def observation_scaling(space: Any, config: GymnasiumTaskConfig) -> tuple[np.nda
         centre[usable] = (low[usable] + high[usable]) / 2.0
         scale[usable] = (high[usable] - low[usable]) / 2.0
     return centre, scale
+
+
+def _at(call: str, step: int) -> str:
+    """Where in an episode a call failed: "in reset", or "at step N"."""
+    return "in reset" if call == "reset" else f"at step {step}"
 
 
 def _one_line(error: BaseException) -> str:

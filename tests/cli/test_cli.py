@@ -278,3 +278,49 @@ def test_the_session_executor_is_part_of_the_experiment_api():
     assert "session_executor" in experiment.__all__
     assert experiment.__all__ == sorted(experiment.__all__, key=lambda n: (n.islower(), n))
     assert experiment.session_executor(None, "serial", None) == "serial"
+
+
+LINE_YAML = """
+name: line
+perturbations: [0.001]
+runs: 1
+tolerance: 1
+max_local_searches: 1
+task: {gymnasium: lonlib-test/Line-v0, fitness_range: [-200, 0], descriptor: DESCRIPTOR}
+ddpg: {batch_size: 16, buffer_size: 200, warmup_steps: 20, max_steps: 60, min_steps: 0,
+       patience_steps: 1000}
+"""
+
+
+def _line_yaml(tmp_path: Path, descriptor: str) -> str:
+    from tests.task.test_gymnasium_task import Line  # noqa: F401 (registers Line-v0)
+
+    path = tmp_path / "line.yaml"
+    path.write_text(LINE_YAML.replace("DESCRIPTOR", descriptor))
+    return str(path)
+
+
+@pytest.mark.parametrize("dry_run", [True, False])
+def test_a_descriptor_with_a_wrong_return_is_one_line_before_any_folder(tmp_path, capsys, dry_run):
+    out = tmp_path / "out"
+    config = _line_yaml(tmp_path, "tests.task.test_gymnasium_behaviour:broken")
+    error = _clean(_fails(["run", config, "--out", str(out), *["--dry-run"] * dry_run], capsys))
+    assert error == (
+        "lonlib: error: task.descriptor (tests.task.test_gymnasium_behaviour:broken): spread "
+        "must be a finite number, got nan\n"
+    )
+    assert not out.exists()
+
+
+def test_checkpoint_minutes_on_a_gymnasium_task_is_said_not_to_apply(tmp_path, capsys):
+    config = _line_yaml(tmp_path, "tests.task.test_gymnasium_behaviour:line_position")
+    out = str(tmp_path / "out")
+    main(["run", config, "--out", out, "--executor", "lockstep", "--dry-run"])
+    assert capsys.readouterr().err == ""
+    main(["run", config, "--out", out, "--checkpoint-minutes", "5", "--dry-run"])
+    printed = capsys.readouterr()
+    assert "Nothing computed or written" in printed.out
+    assert printed.err == (
+        "lonlib: warning: --checkpoint-minutes does not apply to a Gymnasium task: its lockstep "
+        "batch is not checkpointed (an interrupted search re-runs from its start)\n"
+    )

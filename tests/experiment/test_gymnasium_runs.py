@@ -238,7 +238,7 @@ def test_an_environment_failing_in_a_lockstep_batch_names_its_run(tmp_path, monk
         )
     text = str(error.value)
     assert text.startswith("run (p=0.001, run=0), local search 1: local search: ")
-    assert "non-finite observation at step (step 3)" in text and "1 stored" in text
+    assert "non-finite observation at step 3:" in text and "1 stored" in text
     np.testing.assert_array_equal(read_experiment_trials(out)["fitness"], before["fitness"])
 
 
@@ -274,3 +274,81 @@ def test_a_task_descriptor_is_stored_replayed_and_grouped_by(tmp_path):
         assert not report.ok and [f.check for f in report.errors] == ["descriptor"], column
         assert column in report.errors[0].message
     assert json.loads((out / "manifest.json").read_text())["config"]["task"]["descriptor"]
+
+
+def folder_bytes(out) -> dict:
+    """Every file of ``out`` but the lock files (a run's lock names its last holder)."""
+    files = [p for p in sorted(out.rglob("*")) if p.is_file() and not p.name.endswith(".lock")]
+    return {p.relative_to(out): p.read_bytes() for p in files}
+
+
+SWITCHABLE = "tests.task.test_gymnasium_behaviour:switchable"
+
+
+def test_a_bad_descriptor_is_refused_before_any_compute_or_folder(tmp_path, monkeypatch):
+    """A descriptor with a wrong return is one line naming ``task.descriptor`` when the run
+    starts (the pre-flight describes a random Actor's episode), not after a local search."""
+    import lonlib.experiment.running as running
+
+    def no_search(config):
+        raise AssertionError("a local search was started")
+
+    monkeypatch.setattr(running, "experiment_local_search", no_search)
+    out = tmp_path / "line"
+    config = line_config(descriptor="tests.task.test_gymnasium_behaviour:broken")
+    with pytest.raises(ValueError) as error:
+        run_experiment(config, out, progress=False)
+    assert str(error.value).startswith("task.descriptor (tests.task.test_gymnasium_behaviour")
+    assert "spread must be a finite number" in str(error.value) and "\n" not in str(error.value)
+    assert not out.exists()
+
+
+def test_a_descriptor_giving_other_names_on_resume_stops_and_writes_nothing(tmp_path, monkeypatch):
+    """Stored trials keep the columns they were sampled with: a descriptor whose code now
+    gives other names is refused before any compute when the session starts, and, should a
+    run get past that (a process that never checked), before its trial is saved, serially
+    and in lockstep alike, for a resumed run and for a new run of the experiment."""
+    import lonlib.experiment.runs as runs
+    from lonlib.experiment.lockstep import run_lockstep
+    from lonlib.experiment.running import run_one
+    from tests.task import test_gymnasium_behaviour as descriptors
+
+    out = tmp_path / "line"
+    config = line_config(descriptor=SWITCHABLE)
+    run_experiment(dataclasses.replace(config, max_local_searches=1, runs=1), out, progress=False)
+    assert "b_end_distance" in read_experiment_trials(out)
+    before = folder_bytes(out)
+    monkeypatch.setattr(descriptors, "NAMES", ["distance_at_end"])
+    with pytest.raises(ValueError) as error:  # the session's check, before any compute
+        run_experiment(config, out, progress=False, allow_changes=("max_local_searches",))
+    text = str(error.value)
+    assert text.startswith(f"task.descriptor ({SWITCHABLE}) now gives the columns")
+    assert "['b_end_distance']" in text and "\n" not in text
+    assert folder_bytes(out) == before
+    # a worker process that made its own task: the check before each save
+    for call, run, whose in [
+        (lambda: run_one(out, config, 1e-3, 0), 0, "the run's stored trials"),
+        (lambda: run_one(out, config, 1e-3, 1), 1, "the experiment's stored trials"),
+        (lambda: run_lockstep(out, config, [(1e-3, 0)], lambda summary: None, 1), 0, "run's"),
+    ]:
+        monkeypatch.setattr(runs, "_TASKS", {})  # a new process: nothing described yet
+        with pytest.raises(ValueError) as error:
+            call()
+        text = str(error.value)
+        assert text.startswith(f"run (p=0.001, run={run}): task.descriptor ({SWITCHABLE})")
+        assert whose in text and "\n" not in text
+        assert folder_bytes(out) == before
+
+
+def test_a_lockstep_batch_that_fails_closes_its_environments(tmp_path, monkeypatch):
+    from tests.ddpg.test_gymnasium_search import Tracked
+
+    out = tmp_path / "tracked"
+    config = line_config(gymnasium="lonlib-test/Tracked-v0")
+    lockstep = {"progress": False, "executor": "lockstep"}
+    run_experiment(dataclasses.replace(config, max_local_searches=1), out, **lockstep)
+    open_before = set(Tracked.OPEN)  # the task's own environment (for greedy episodes)
+    monkeypatch.setattr(Line, "FAULT", "raise")  # the training environments now fail
+    with pytest.raises(TaskEnvironmentError):
+        run_experiment(config, out, allow_changes=("max_local_searches",), **lockstep)
+    assert open_before == Tracked.OPEN

@@ -120,3 +120,19 @@ def test_the_sb3_searches_run_on_the_cpu_only(tmp_path):
         check_search(config.task.search, "cuda")
     cpu = dataclasses.replace(config, ddpg=dataclasses.replace(config.ddpg, device="cpu"))
     check_search(cpu.task.search, cpu.ddpg.device)
+
+
+@pytest.mark.parametrize("dry_run", [True, False])
+def test_lockstep_with_an_sb3_search_is_refused_by_the_dry_run_as_by_the_run(
+    tmp_path, capsys, dry_run
+):
+    out = tmp_path / "out"
+    argv = ["run", str(write_yaml(tmp_path)), "--out", str(out), "--executor", "lockstep"]
+    with pytest.raises(SystemExit) as stopped:
+        cli_main([*argv, *["--dry-run"] * dry_run])
+    assert stopped.value.code == 2
+    assert capsys.readouterr().err == (
+        "lonlib: error: executor: lockstep batches lonlib's DDPG (task.search: ddpg); "
+        "task.search 'sb3-td3' runs with auto, serial, pool or dask\n"
+    )
+    assert not out.exists()

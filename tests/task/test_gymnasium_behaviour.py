@@ -124,3 +124,31 @@ def test_a_descriptor_that_raises_or_varies_is_one_line(name, error):
         describe_optimum(task, theta)
         describe_optimum(task, theta)
     assert error in str(raised.value) and "\n" not in str(raised.value)
+
+
+NAMES = ["end_distance"]
+
+
+def switchable(trace):
+    """A descriptor whose names a test changes (as if its code had been edited since)."""
+    return {name: float(abs(trace.observations[-1, 0])) for name in NAMES}
+
+
+def test_the_preflight_describes_a_random_actors_episode_and_leaves_the_names_alone():
+    from lonlib.task.gymnasium_behaviour import check_descriptor
+
+    config = GymnasiumTaskConfig(
+        "Pendulum-v1",
+        (-3254.72, 0.0),
+        episode_steps=5,
+        descriptor="tests.task.test_gymnasium_behaviour:line_position",
+    )
+    task = GymnasiumTask(config)
+    assert check_descriptor(task) == ["b_end_distance", "b_steps", "label"]
+    assert task.descriptor_names is None  # the optima's names are their own to fix
+    broken_task = GymnasiumTask(
+        dataclasses.replace(config, descriptor="tests.task.test_gymnasium_behaviour:broken")
+    )
+    with pytest.raises(ValueError, match=r"^task.descriptor \(.*:broken\): spread must be"):
+        check_descriptor(broken_task)
+    assert check_descriptor(GymnasiumTask(dataclasses.replace(config, descriptor=""))) == []

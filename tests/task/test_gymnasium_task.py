@@ -94,11 +94,11 @@ def test_the_fitness_is_the_greedy_episode_return_normalised():
 @pytest.mark.parametrize(
     ("fault", "message"),
     [
-        ("reset", "raised in reset at step 0: RuntimeError: the simulator could not start"),
-        ("raise", "raised in step at step 3: ValueError: contact solver diverged"),
-        ("nan-observation", "returned a non-finite observation at step (step 3)"),
+        ("reset", "raised in reset: RuntimeError: the simulator could not start"),
+        ("raise", "raised at step 3: ValueError: contact solver diverged"),
+        ("nan-observation", "returned a non-finite observation at step 3:"),
         ("nan-reward", "returned the reward nan at step 3"),
-        ("spaces", "changed its observation or action space at step (step 3)"),
+        ("spaces", "changed its observation or action space at step 3;"),
     ],
 )
 def test_a_misbehaving_environment_is_one_line_naming_the_call_and_step(fault, message):
@@ -108,7 +108,7 @@ def test_a_misbehaving_environment_is_one_line_naming_the_call_and_step(fault, m
         line.greedy_episode(theta, where="run (p=0.001, run=0)")
     text = str(error.value)
     assert "\n" not in text and text.startswith("run (p=0.001, run=0): lonlib-test/Line-v0")
-    assert message in text
+    assert message in text and "(step" not in text  # said once: "at step 3", not "(step 3)"
 
 
 @pytest.mark.parametrize(
