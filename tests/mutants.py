@@ -58,6 +58,7 @@ GYM_DDPG = "lonlib/ddpg/gymnasium_search.py"
 GYM_BEHAVIOUR = "lonlib/task/gymnasium_behaviour.py"
 GYM_DESCRIPTORS = "lonlib/task/gymnasium_descriptors.py"
 RUNS = "lonlib/experiment/runs.py"
+CLI_RUN, IMPORTS = "lonlib/cli/_experiments.py", "lonlib/util/imports.py"
 DIGESTS_FORMAT, DIGESTS_WRITE = (
     "lonlib/storage/_digests_format.py",
     "lonlib/storage/_digests_write.py",
@@ -159,6 +160,8 @@ GUARDS = {
     ],
     GYM_DESCRIPTORS: ["tests/task/test_gymnasium_descriptors.py"],
     RUNS: ["tests/experiment/test_gymnasium_runs.py"],
+    CLI_RUN: ["tests/cli/test_cli.py"],
+    IMPORTS: ["tests/task/test_gymnasium_behaviour.py"],
     TRIALS: ["tests/storage/test_digests.py"],
     SESSION: ["tests/storage/test_digests.py"],
 }
@@ -1453,6 +1456,24 @@ MUTANTS = [
         "    if columns is not None and behaviour_names(columns) != names:",
         "    if False:",
         "a session starts with a descriptor whose names the stored trials do not have",
+    ),
+    Mutant(
+        RUNS,
+        "    if is_sealed(out):  # a hand edit",
+        "    if False:  # a hand edit",
+        "a descriptor written into a sealed manifest by hand reads as a changed descriptor",
+    ),
+    Mutant(
+        CLI_RUN,
+        "        minutes = CHECKPOINT_SECONDS / 60",
+        "        minutes = 0",
+        "lonlib run writes no in-flight checkpoints unless told to",
+    ),
+    Mutant(
+        IMPORTS,
+        "    except Exception as error:  # the user's module raised while it was imported",
+        "    except ZeroDivisionError as error:",
+        "a descriptor module that raises while imported is a traceback",
     ),
 ]
 

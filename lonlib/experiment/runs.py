@@ -19,9 +19,16 @@ from lonlib.search.algorithm import (
     random_parameters,
 )
 from lonlib.storage.atomic import CorruptDataError, remove_temporary_files
-from lonlib.storage.digests import drop_unwritten_trials
+from lonlib.storage.digests import check_readable, drop_unwritten_trials, is_sealed
 from lonlib.storage.inflight import Plan
-from lonlib.storage.layout import RUN_LOCK, run_dir, stored_config, trials_path
+from lonlib.storage.layout import (
+    RUN_LOCK,
+    config_of_manifest,
+    read_manifest,
+    run_dir,
+    stored_config,
+    trials_path,
+)
 from lonlib.storage.lock import LockHeld, exclusive_lock
 from lonlib.storage.trials import load_run_state, stored_trial_columns
 from lonlib.task.gymnasium_behaviour import behaviour_names, check_descriptor
@@ -103,9 +110,13 @@ def check_task_descriptor(config: ExperimentConfig, out: Path) -> None:
         return
     names = check_descriptor(experiment_task(config))
     try:
-        same_task = stored_config(out).task == config.task
+        manifest = read_manifest(out)
+        stored = config_of_manifest(manifest, Path(out) / "manifest.json")
     except (OSError, CorruptDataError):  # none there yet, or unreadable: the session says so
         return
+    if is_sealed(out):  # a hand edit is named as such, not as a changed descriptor
+        check_readable(out, manifest, "lonlib run", files=False)
+    same_task = stored.task == config.task
     columns = stored_trial_columns(out) if same_task else None  # else the session refuses it
     if columns is not None and behaviour_names(columns) != names:
         raise ValueError(

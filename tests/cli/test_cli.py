@@ -324,3 +324,19 @@ def test_checkpoint_minutes_on_a_gymnasium_task_is_said_not_to_apply(tmp_path, c
         "lonlib: warning: --checkpoint-minutes does not apply to a Gymnasium task: its lockstep "
         "batch is not checkpointed (an interrupted search re-runs from its start)\n"
     )
+
+
+@pytest.mark.parametrize(
+    "flag, seconds",
+    [([], 600.0), (["--checkpoint-minutes", "0"], None), (["--checkpoint-minutes", "5"], 300.0)],
+)
+def test_run_checkpoints_every_ten_minutes_unless_told(
+    tmp_path, monkeypatch, capsys, flag, seconds
+):
+    """The lockstep runs' in-flight checkpoints: every 10 minutes by default, never with 0."""
+    import lonlib.experiment.running as running
+
+    calls = []
+    monkeypatch.setattr(running, "run_experiment", lambda *a, **kw: calls.append(kw) or [])
+    main(["run", "configs/quick-robust.yaml", "--out", str(tmp_path / "x"), *flag])
+    assert [call["checkpoint_seconds"] for call in calls] == [seconds]

@@ -3,6 +3,7 @@ replays it, ``analyse`` draws what applies and says what it skips, and an enviro
 fails mid-run stops the run with its name while what was stored stays."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pandas as pd
@@ -352,3 +353,21 @@ def test_a_lockstep_batch_that_fails_closes_its_environments(tmp_path, monkeypat
     with pytest.raises(TaskEnvironmentError):
         run_experiment(config, out, allow_changes=("max_local_searches",), **lockstep)
     assert open_before == Tracked.OPEN
+
+
+def test_a_hand_edited_manifest_is_named_before_the_descriptor_is_compared(tmp_path):
+    """A descriptor written into a sealed folder's manifest by hand is the manifest's
+    tampering (named by the digest check), not a descriptor that changed its names."""
+    from lonlib.storage.digests import TamperedDataError
+
+    out = tmp_path / "line"
+    config = line_config()
+    run_experiment(dataclasses.replace(config, max_local_searches=1, runs=1), out, progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest["config"]["task"]["descriptor"] = SWITCHABLE
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    before = folder_bytes(out)
+    with pytest.raises(TamperedDataError) as error:
+        run_experiment(line_config(descriptor=SWITCHABLE), out, progress=False)
+    assert "manifest.json" in str(error.value) and "descriptor" not in str(error.value)
+    assert folder_bytes(out) == before

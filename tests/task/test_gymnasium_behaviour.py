@@ -152,3 +152,16 @@ def test_the_preflight_describes_a_random_actors_episode_and_leaves_the_names_al
     with pytest.raises(ValueError, match=r"^task.descriptor \(.*:broken\): spread must be"):
         check_descriptor(broken_task)
     assert check_descriptor(GymnasiumTask(dataclasses.replace(config, descriptor=""))) == []
+
+
+def test_a_descriptor_module_that_raises_while_imported_is_one_line(tmp_path, monkeypatch):
+    (tmp_path / "lonlib_raising_module.py").write_text('raise RuntimeError("boom at import")\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    config = GymnasiumTaskConfig(
+        "Pendulum-v1", (-1.0, 0.0), descriptor="lonlib_raising_module:describe"
+    )
+    with pytest.raises(ValueError) as raised:
+        GymnasiumTask(config)
+    text = str(raised.value)
+    assert text.startswith("task.descriptor: importing 'lonlib_raising_module' raised")
+    assert "RuntimeError: boom at import" in text and "\n" not in text
