@@ -138,8 +138,10 @@ def behaviour_columns(described: Any, name: str) -> dict[str, Any]:
     columns: dict[str, Any] = {}
     for key, value in described.items():
         if key == "label":
-            if not isinstance(value, str) or not value:
-                raise ValueError(f"{field}: label must be non-empty text, got {value!r}")
+            if not isinstance(value, str) or not value.strip() or not value.isprintable():
+                raise ValueError(
+                    f"{field}: label must be non-empty text on one line, got {value!r}"
+                )
             columns["label"] = value
             continue
         if not isinstance(key, str) or not NAME.fullmatch(key):

@@ -80,6 +80,8 @@ def test_a_descriptor_that_cannot_be_found_is_refused_by_name(descriptor, error)
         ({"spread": float("nan")}, "spread must be a finite number"),
         ({"spread": "wide"}, "spread must be a finite number"),
         ({"label": 3}, "label must be non-empty text"),
+        ({"label": "two\nlines"}, "label must be non-empty text on one line"),
+        ({"label": " "}, "label must be non-empty text on one line"),
     ],
 )
 def test_a_wrong_return_names_the_descriptor_and_the_entry(returned, error):
