@@ -1144,6 +1144,12 @@ MUTANTS = [
     ),
     Mutant(
         VERIFY,
+        'relative and absolute tolerance."""\n        if exact:',
+        'relative and absolute tolerance."""\n        if False:',
+        "verify compares a b_* value within a tolerance on the sampling's own machine",
+    ),
+    Mutant(
+        VERIFY,
         'if not _same(row["start_fitness"], score):',
         'if not _same(row["start_fitness"], row["start_fitness"]):',
         "verify never compares a start fitness",
