@@ -342,6 +342,18 @@ MUTANTS = [
     ),
     Mutant(
         OUTPUTS,
+        "    seal_outputs_ahead(root, figures=ahead, inputs=inputs)",
+        "    seal_outputs_ahead(root, figures=ahead)",
+        "analyse seals its figures ahead as drawn from the trials sealed now, not those loaded",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        '"head": entries[count - 1]["chain"],',
+        '"head": entries[-1]["chain"],',
+        "the loaded inputs name a run's newest chain head, not the head at the count read",
+    ),
+    Mutant(
+        OUTPUTS,
         "    seal_outputs_ahead(root, recordings=ahead)",
         "    pass",
         "record renames its recordings into place without sealing them ahead",

@@ -678,6 +678,28 @@ def test_figures_are_sealed_as_drawn_from_the_trials_the_analysis_loaded(other, 
     assert verify_experiment(out, recordings=False).errors == []
 
 
+def test_the_loaded_inputs_name_the_chain_at_the_count_read(other, tmp_path, monkeypatch):
+    """A trial sealed in a run's ``digests.json`` after the reader read its trials table:
+    the loaded inputs name the chain head at the count the reader read, not the newest."""
+    from lonlib.analysis.landscape import StoredExperiment
+    from lonlib.storage import _digests_format
+    from lonlib.storage._digests_format import inputs_now, loaded_inputs
+
+    out = tmp_path / "out"
+    shutil.copytree(other[1], out)
+    experiment = StoredExperiment.load(out)
+    expected = inputs_now(out, json.loads((out / SEAL_NAME).read_text()))
+    assert loaded_inputs(out, experiment.trials) == expected
+    read_run = _digests_format.read_run
+
+    def sealed_meanwhile(path, *args, **kwargs):
+        entries, *rest = read_run(path, *args, **kwargs)
+        return (entries + [{**entries[-1], "chain": "f" * 64}], *rest)
+
+    monkeypatch.setattr(_digests_format, "read_run", sealed_meanwhile)
+    assert loaded_inputs(out, experiment.trials) == expected
+
+
 CHANGE_POINTS = [
     (SEAL_NAME, 1),  # the root sealed ahead of the manifest with the changed setting
     ("manifest.json", 1),  # the manifest written, the root not yet
