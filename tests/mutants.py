@@ -410,15 +410,51 @@ MUTANTS = [
     ),
     Mutant(
         DIGESTS_FORMAT,
-        'bad = [n for n in ahead.get("files", {}) if not _is_figure_key(n)]',
+        "bad = [n for n in keys if not _is_figure_key(n)]",
         "bad = []",
         "figures.next may name a file outside figures/",
     ),
     Mutant(
         DIGESTS_FORMAT,
-        'bad = [n for n in payload.get("recordings_next", {}) if not _is_file_name(n)]',
+        '        ("figures.files", figures.get("files", {})),\n',
+        "",
+        "a settled figure (figures.files) may name a file outside figures/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        '        ("figures.inputs_of", drawn),\n',
+        "",
+        "figures.inputs_of may name a file outside figures/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "bad = [n for n in recordings if not _is_file_name(n)]",
         "bad = []",
         "recordings_next may name a file outside recordings/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "bad = [n for n in recordings if not _is_file_name(n)]",
+        'bad = [n for n in recordings if name == "recordings_next" and not _is_file_name(n)]',
+        "a settled recording may name a file outside recordings/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        '        and len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES\n',
+        "",
+        "a sealed file name may be longer than 255 bytes",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        'len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES',
+        "len(name) <= MAX_NAME_BYTES",
+        "a sealed file name's bound counts characters, not UTF-8 bytes",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "or len(name) > MAX_KEY_CHARS:",
+        "or False:",
+        "a sealed figure key may be longer than 4096 characters",
     ),
     Mutant(
         OUTPUTS,
