@@ -345,6 +345,18 @@ MUTANTS = [
     ),
     Mutant(
         OUTPUTS,
+        "    seal_outputs_ahead(root, figures=ahead, inputs=inputs)",
+        "    seal_outputs_ahead(root, figures=ahead)",
+        "analyse seals its figures ahead as drawn from the trials sealed now, not those loaded",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        '"head": entries[count - 1]["chain"],',
+        '"head": entries[-1]["chain"],',
+        "the loaded inputs name a run's newest chain head, not the head at the count read",
+    ),
+    Mutant(
+        OUTPUTS,
         "    seal_outputs_ahead(root, recordings=ahead)",
         "    pass",
         "record renames its recordings into place without sealing them ahead",
@@ -401,15 +413,51 @@ MUTANTS = [
     ),
     Mutant(
         DIGESTS_FORMAT,
-        'bad = [n for n in ahead.get("files", {}) if not _is_figure_key(n)]',
+        "bad = [n for n in keys if not _is_figure_key(n)]",
         "bad = []",
         "figures.next may name a file outside figures/",
     ),
     Mutant(
         DIGESTS_FORMAT,
-        'bad = [n for n in payload.get("recordings_next", {}) if not _is_file_name(n)]',
+        '        ("figures.files", figures.get("files", {})),\n',
+        "",
+        "a settled figure (figures.files) may name a file outside figures/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        '        ("figures.inputs_of", drawn),\n',
+        "",
+        "figures.inputs_of may name a file outside figures/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "bad = [n for n in recordings if not _is_file_name(n)]",
         "bad = []",
         "recordings_next may name a file outside recordings/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "bad = [n for n in recordings if not _is_file_name(n)]",
+        'bad = [n for n in recordings if name == "recordings_next" and not _is_file_name(n)]',
+        "a settled recording may name a file outside recordings/",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        '        and len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES\n',
+        "",
+        "a sealed file name may be longer than 255 bytes",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        'len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES',
+        "len(name) <= MAX_NAME_BYTES",
+        "a sealed file name's bound counts characters, not UTF-8 bytes",
+    ),
+    Mutant(
+        DIGESTS_FORMAT,
+        "or len(name) > MAX_KEY_CHARS:",
+        "or False:",
+        "a sealed figure key may be longer than 4096 characters",
     ),
     Mutant(
         OUTPUTS,
@@ -1144,6 +1192,12 @@ MUTANTS = [
         "offsets = np.repeat(nominal_offsets(config, seed or 0), batch_size, axis=1)",
         "offsets = np.repeat(nominal_offsets(config, 0), batch_size, axis=1)",
         "one-rollout: evaluate ignores its seed",
+    ),
+    Mutant(
+        VERIFY,
+        'relative and absolute tolerance."""\n        if exact:',
+        'relative and absolute tolerance."""\n        if False:',
+        "verify compares a b_* value within a tolerance on the sampling's own machine",
     ),
     Mutant(
         VERIFY,

@@ -214,9 +214,9 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
             isinstance(v, dict) and _is_digest(v.get("sha256")) for v in recordings.values()
         ):
             return f"'{name}' is not a mapping of recordings to their trial and digest"
-    bad = [n for n in payload.get("recordings_next", {}) if not _is_file_name(n)]
-    if bad:
-        return f"'recordings_next' names {bad[0]!r}, not a plain file name"
+        bad = [n for n in recordings if not _is_file_name(n)]
+        if bad:
+            return f"'{name}' names {bad[0][:MAX_KEY_SHOWN]!r}, not a plain file name"
     for name in ("result_path_versions", "result_path_versions_next"):
         if name in payload and not isinstance(payload[name], list):
             return f"'{name}' is not a list"
@@ -236,19 +236,43 @@ def _shape_problem(payload: dict[str, Any], run: bool) -> str | None:
         and (ahead.get("inputs") is None or _is_digest(ahead.get("inputs")))
     ):
         return "'figures.next' is not a mapping of figures to digests (or None) and their inputs"
-    bad = [n for n in ahead.get("files", {}) if not _is_figure_key(n)]
-    if bad:
-        return f"'figures.next' names {bad[0]!r}, not a file under {FIGURES_FOLDER}/"
+    for name, keys in (
+        ("figures.files", figures.get("files", {})),
+        ("figures.inputs_of", drawn),
+        ("figures.next", ahead.get("files", {})),
+    ):
+        bad = [n for n in keys if not _is_figure_key(n)]
+        if bad:
+            return f"'{name}' names {bad[0][:MAX_KEY_SHOWN]!r}, not a file under {FIGURES_FOLDER}/"
     return None
 
 
+MAX_NAME_BYTES = 255
+"""The longest file name (one path part) a seal may name, in UTF-8 bytes (the common file
+systems' limit)."""
+MAX_KEY_CHARS = 4096
+"""The longest path (figures' keys) a seal may name, in characters."""
+MAX_KEY_SHOWN = 200
+"""The characters of a bad key a shape error quotes."""
+
+
 def _is_file_name(name: str) -> bool:
-    """A plain file name: no folder, not ``.`` or ``..``."""
-    return bool(name) and name not in (".", "..") and not set(name) & {"/", "\\", "\0"}
+    """A plain file name: no folder, not ``.`` or ``..``, at most :data:`MAX_NAME_BYTES`
+    bytes in UTF-8."""
+    return (
+        isinstance(name, str)
+        and bool(name)
+        and name not in (".", "..")
+        and not set(name) & {"/", "\\", "\0"}
+        and len(name.encode("utf-8", "surrogatepass")) <= MAX_NAME_BYTES
+    )
 
 
 def _is_figure_key(name: str) -> bool:
-    """A relative POSIX path of a file under the figures folder, with no ``..``."""
+    """A relative POSIX path of a file under the figures folder, with no ``..``, at most
+    :data:`MAX_KEY_CHARS` characters, each part a plain file name (:func:`_is_file_name`)."""
+    if not isinstance(name, str) or len(name) > MAX_KEY_CHARS:
+        return False
     parts = name.split("/")
     return (
         len(parts) >= 2

@@ -133,3 +133,15 @@ def test_sampled_elsewhere_a_behaviour_value_replays_within_a_relative_tolerance
     report = verify_experiment(out, recordings=False)
     [warning] = [f for f in report.warnings if f.check == "descriptor"]
     assert warning.message.startswith("b_steps stored 20.0000002")
+
+
+def test_sampled_here_a_behaviour_value_must_replay_bit_for_bit(sampled, tmp_path):
+    """Replayed on the sampling's own machine (same CPU dispatch and Gymnasium version),
+    ``b_steps`` = 20 stored 20 x (1 + 1e-12), within every tolerance, is an error."""
+    out = copy(sampled, "described", tmp_path)
+    edit_first_trial(out, b_steps=20 * (1 + 1e-12))
+    report = verify_experiment(out, recordings=False)
+    assert any("replayed bit for bit" in f.message for f in report.findings)
+    [error] = report.errors
+    assert (error.check, error.run, error.index) == ("descriptor", 0, 0)
+    assert error.message.startswith("b_steps stored 20.00000000002")

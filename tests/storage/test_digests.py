@@ -450,6 +450,8 @@ def test_a_malformed_seal_is_one_line_naming_it(small, copy, shape):
 
 
 DIGEST = "0" * 64
+LONG_PATH = "figures/" + "/".join(["a" * 255] * 16)[: 4097 - len("figures/")]
+"""A figure key of 4097 characters, each of its names 255 bytes or fewer."""
 
 
 @pytest.mark.parametrize(
@@ -462,6 +464,13 @@ DIGEST = "0" * 64
         ("recordings_next", {"recordings_next": {"../seal.json": {"sha256": DIGEST}}}),
         ("recordings_next", {"recordings_next": {"a/b.rrd": {"sha256": DIGEST}}}),
         ("recordings_next", {"recordings_next": {"..": {"sha256": DIGEST}}}),
+        ("figures.files", {"figures": {"files": {"/etc/passwd": DIGEST}}}),
+        ("figures.files", {"figures": {"files": {"../../etc/hostname": DIGEST}}}),
+        ("figures.inputs_of", {"figures": {"inputs_of": {"figures/../seal.json": None}}}),
+        ("recordings", {"recordings": {"../seal.json": {"sha256": DIGEST}}}),
+        ("figures.next", {"figures": {"next": {"files": {"figures/" + "a" * 5000: None}}}}),
+        ("figures.next", {"figures": {"next": {"files": {LONG_PATH: None}}}}),
+        ("recordings", {"recordings": {"é" * 126 + ".rrd": {"sha256": DIGEST}}}),
     ],
     ids=[
         "figure ..",
@@ -471,16 +480,37 @@ DIGEST = "0" * 64
         "recording ../",
         "recording in a folder",
         "recording named ..",
+        "settled figure absolute",
+        "settled figure ../",
+        "figure drawn from ..",
+        "settled recording ../",
+        "figure name of 5000 characters",
+        "figure path of 4097 characters",
+        "recording name of 256 bytes",
     ],
 )
 def test_a_seal_ahead_naming_a_file_outside_its_folder_is_malformed(small, copy, field, shape):
-    """The outputs sealed ahead name files under ``figures/`` (relative, no ``..``) and plain
-    recording names: any other key is the seal's shape error naming the field."""
+    """The outputs sealed (ahead or settled) name files under ``figures/`` (relative, no
+    ``..``) and plain recording names, each name at most 255 bytes and each path at most 4096
+    characters: any other key is the seal's shape error naming the field."""
     seal = json.loads((copy / SEAL_NAME).read_text())
     (copy / SEAL_NAME).write_text(json.dumps({**seal, **shape}))
     with pytest.raises(TamperedDataError, match=f"seal.json: not a well-formed seal.*'{field}'"):
         load_experiment(copy)
     assert any("seal.json" in e and field in e for e in findings(copy))
+
+
+def test_names_at_the_length_bounds_are_well_formed():
+    """A 255-byte name (two-byte characters) and a 4096-character figure key are accepted."""
+    from lonlib.storage._digests_format import _shape_problem
+
+    name = "é" * 125 + "x.rrd"
+    assert len(name.encode()) == 255
+    assert _shape_problem({"recordings": {name: {"sha256": DIGEST}}}, False) is None
+    key = LONG_PATH[:4096]
+    assert len(key) == 4096
+    figures = {"files": {key: DIGEST}, "inputs_of": {key: None}, "next": {"files": {key: None}}}
+    assert _shape_problem({"figures": figures}, False) is None
 
 
 def test_a_malformed_run_digests_is_one_line_naming_it(small, copy):
@@ -676,6 +706,28 @@ def test_figures_are_sealed_as_drawn_from_the_trials_the_analysis_loaded(other, 
     listed = len(figures["files"])
     assert stale_note(out).startswith(f"{listed} of {listed} figures and tables")
     assert verify_experiment(out, recordings=False).errors == []
+
+
+def test_the_loaded_inputs_name_the_chain_at_the_count_read(other, tmp_path, monkeypatch):
+    """A trial sealed in a run's ``digests.json`` after the reader read its trials table:
+    the loaded inputs name the chain head at the count the reader read, not the newest."""
+    from lonlib.analysis.landscape import StoredExperiment
+    from lonlib.storage import _digests_format
+    from lonlib.storage._digests_format import inputs_now, loaded_inputs
+
+    out = tmp_path / "out"
+    shutil.copytree(other[1], out)
+    experiment = StoredExperiment.load(out)
+    expected = inputs_now(out, json.loads((out / SEAL_NAME).read_text()))
+    assert loaded_inputs(out, experiment.trials) == expected
+    read_run = _digests_format.read_run
+
+    def sealed_meanwhile(path, *args, **kwargs):
+        entries, *rest = read_run(path, *args, **kwargs)
+        return (entries + [{**entries[-1], "chain": "f" * 64}], *rest)
+
+    monkeypatch.setattr(_digests_format, "read_run", sealed_meanwhile)
+    assert loaded_inputs(out, experiment.trials) == expected
 
 
 CHANGE_POINTS = [

@@ -541,3 +541,30 @@ def test_figures_removed_with_nothing_staged_are_removed_and_resealed(sampled, t
     assert not any(f"figures/{name}" in sealed for name in gone)
     assert "figures/summary.csv" in sealed
     assert_complete(out)
+
+
+def test_figures_are_sealed_ahead_as_drawn_from_the_trials_the_analysis_loaded(
+    sampled, tmp_path, monkeypatch
+):
+    """A session appends a trial to each run after the analysis loaded the trials, and the
+    analysis is killed between sealing its figures ahead and renaming them into place: they
+    are sealed ahead as drawn from the trials it loaded, not from those sealed now."""
+    import dataclasses
+
+    from lonlib.analysis.landscape import StoredExperiment
+    from lonlib.config import load_config
+    from lonlib.experiment.running import run_experiment
+    from lonlib.storage._digests_format import inputs_now
+
+    out = copy_of(sampled, tmp_path)
+    experiment = StoredExperiment.load(out)
+    loaded = inputs_now(out, json.loads((out / SEAL_NAME).read_text()))
+    config = load_config(sampled.parent / "outputs.yaml")
+    config = dataclasses.replace(config, max_local_searches=3)
+    run_experiment(config, out, progress=False, allow_changes=["max_local_searches"])
+    assert loaded != inputs_now(out, json.loads((out / SEAL_NAME).read_text()))
+    kill_at(monkeypatch, "call:_rename")
+    with pytest.raises(Killed):
+        analyse(experiment, close_figures=True, conditioning=False)
+    ahead = json.loads((out / SEAL_NAME).read_text())["figures"]["next"]
+    assert ahead["files"] and ahead["inputs"] == loaded
