@@ -1513,8 +1513,8 @@ MUTANTS = [
     ),
     Mutant(
         RUNS,
-        "    if is_sealed(out):  # a hand edit",
-        "    if False:  # a hand edit",
+        "    if seal.sealed:",
+        "    if False:",
         "a descriptor written into a sealed manifest by hand reads as a changed descriptor",
     ),
     Mutant(
@@ -1525,7 +1525,7 @@ MUTANTS = [
     ),
     Mutant(
         IMPORTS,
-        "    except Exception as error:  # the user's module raised while it was imported",
+        "    except (Exception, SystemExit) as error:  # the user's module raised (or exited)",
         "    except ZeroDivisionError as error:",
         "a descriptor module that raises while imported is a traceback",
     ),

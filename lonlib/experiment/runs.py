@@ -19,7 +19,7 @@ from lonlib.search.algorithm import (
     random_parameters,
 )
 from lonlib.storage.atomic import CorruptDataError, remove_temporary_files
-from lonlib.storage.digests import check_readable, drop_unwritten_trials, is_sealed
+from lonlib.storage.digests import check_experiment_seal, drop_unwritten_trials
 from lonlib.storage.inflight import Plan
 from lonlib.storage.layout import (
     RUN_LOCK,
@@ -114,8 +114,11 @@ def check_task_descriptor(config: ExperimentConfig, out: Path) -> None:
         stored = config_of_manifest(manifest, Path(out) / "manifest.json")
     except (OSError, CorruptDataError):  # none there yet, or unreadable: the session says so
         return
-    if is_sealed(out):  # a hand edit is named as such, not as a changed descriptor
-        check_readable(out, manifest, "lonlib run", files=False)
+    # a hand edit is named as such, not as a changed descriptor (an unsealed folder: the
+    # session warns once)
+    seal = check_experiment_seal(out, manifest, figures=False, recordings=False, files=False)
+    if seal.sealed:
+        seal.raise_if_tampered("lonlib run")
     same_task = stored.task == config.task
     columns = stored_trial_columns(out) if same_task else None  # else the session refuses it
     if columns is not None and behaviour_names(columns) != names:

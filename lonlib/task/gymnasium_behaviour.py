@@ -138,7 +138,7 @@ def behaviour_columns(described: Any, name: str) -> dict[str, Any]:
     columns: dict[str, Any] = {}
     for key, value in described.items():
         if key == "label":
-            if not isinstance(value, str) or not value.strip() or not value.isprintable():
+            if not isinstance(value, str) or not value.strip() or len(value.splitlines()) != 1:
                 raise ValueError(
                     f"{field}: label must be non-empty text on one line, got {value!r}"
                 )

@@ -14,15 +14,19 @@ def import_function(name: str, field: str) -> Callable[..., Any]:
     try:
         module = importlib.import_module(module_name)
     except ImportError as error:
-        raise ValueError(f"{field}: cannot import {module_name!r} ({error})") from None
-    except Exception as error:  # the user's module raised while it was imported
+        raise ValueError(f"{field}: cannot import {module_name!r} ({_one_line(error)})") from None
+    except (Exception, SystemExit) as error:  # the user's module raised (or exited) on import
         raise ValueError(
-            f"{field}: importing {module_name!r} raised {type(error).__name__}: {error}"
+            f"{field}: importing {module_name!r} raised {type(error).__name__}: {_one_line(error)}"
         ) from None
     function = getattr(module, function_name, None)
     if not callable(function):
         raise ValueError(f"{field}: {module_name!r} has no function {function_name!r}")
     return function  # type: ignore[no-any-return]
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split())
 
 
 __all__ = ["import_function"]

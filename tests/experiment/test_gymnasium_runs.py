@@ -371,3 +371,7 @@ def test_a_hand_edited_manifest_is_named_before_the_descriptor_is_compared(tmp_p
         run_experiment(line_config(descriptor=SWITCHABLE), out, progress=False)
     assert "manifest.json" in str(error.value) and "descriptor" not in str(error.value)
     assert folder_bytes(out) == before
+    (out / "seal.json").unlink()  # its runs' digests still say it was sealed
+    with pytest.raises(TamperedDataError) as error:
+        run_experiment(line_config(descriptor=SWITCHABLE), out, progress=False)
+    assert "seal.json" in str(error.value) and "descriptor" not in str(error.value)

@@ -157,7 +157,8 @@ def test_the_preflight_describes_a_random_actors_episode_and_leaves_the_names_al
 
 
 def test_a_descriptor_module_that_raises_while_imported_is_one_line(tmp_path, monkeypatch):
-    (tmp_path / "lonlib_raising_module.py").write_text('raise RuntimeError("boom at import")\n')
+    (tmp_path / "lonlib_raising_module.py").write_text('raise RuntimeError("boom at\\nimport")\n')
+    (tmp_path / "lonlib_exiting_module.py").write_text("import sys\nsys.exit(3)\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     config = GymnasiumTaskConfig(
         "Pendulum-v1", (-1.0, 0.0), descriptor="lonlib_raising_module:describe"
@@ -167,3 +168,5 @@ def test_a_descriptor_module_that_raises_while_imported_is_one_line(tmp_path, mo
     text = str(raised.value)
     assert text.startswith("task.descriptor: importing 'lonlib_raising_module' raised")
     assert "RuntimeError: boom at import" in text and "\n" not in text
+    with pytest.raises(ValueError, match="importing 'lonlib_exiting_module' raised SystemExit: 3"):
+        GymnasiumTask(dataclasses.replace(config, descriptor="lonlib_exiting_module:describe"))
