@@ -267,15 +267,22 @@ def test_an_unsealed_folder_gets_its_outputs_renamed_and_no_seal(sampled, tmp_pa
     assert not (out / SEAL_NAME).exists() and not (out / "figures" / STAGING).exists()
 
 
-def test_verify_seal_refuses_a_folder_an_analysis_left_part_way(sampled, tmp_path, monkeypatch):
-    """A mixed set of old and new figures is never sealed as complete: ``--seal`` asks for
-    the interrupted command first."""
+def analysis_killed_at(sampled: Path, tmp_path: Path, monkeypatch, point: str) -> Path:
+    """A copy of ``sampled`` analysed once (:data:`EARLIER`), then analysed again and killed
+    at ``point``."""
     out = copy_of(sampled, tmp_path)
     analyse(out, close_figures=True, **EARLIER)
-    kill_at(monkeypatch, "summary.csv#1")
+    kill_at(monkeypatch, point)
     with pytest.raises(Killed):
         analyse(out, close_figures=True)
     monkeypatch.undo()
+    return out
+
+
+def test_verify_seal_refuses_a_folder_an_analysis_left_part_way(sampled, tmp_path, monkeypatch):
+    """A mixed set of old and new figures is never sealed as complete: ``--seal`` asks for
+    the interrupted command first."""
+    out = analysis_killed_at(sampled, tmp_path, monkeypatch, "summary.csv#1")
     with pytest.raises(SystemExit) as exited:
         cli_main(["verify", str(out), "--seal"])
     assert exited.value.code == 2
@@ -289,12 +296,7 @@ def test_a_figure_tampered_while_its_new_digest_is_pending_ahead_differs(
 ):
     """A figure put in place as sealed ahead (an analysis killed part-way) is accepted only
     while it holds what was sealed ahead: edited, verify names it."""
-    out = copy_of(sampled, tmp_path)
-    analyse(out, close_figures=True, **EARLIER)
-    kill_at(monkeypatch, "fig2_optima_boxplot.png#1")
-    with pytest.raises(Killed):
-        analyse(out, close_figures=True)
-    monkeypatch.undo()
+    out = analysis_killed_at(sampled, tmp_path, monkeypatch, "fig2_optima_boxplot.png#1")
     name = "figures/fig2_optima_boxplot.png"
     assert name in json.loads((out / SEAL_NAME).read_text())["figures"]["next"]["files"]
     (out / name).write_bytes((out / name).read_bytes() + b"\0")
