@@ -267,16 +267,37 @@ def test_an_unsealed_folder_gets_its_outputs_renamed_and_no_seal(sampled, tmp_pa
     assert not (out / SEAL_NAME).exists() and not (out / "figures" / STAGING).exists()
 
 
+def killed_the_second_time(sampled: Path, tmp_path: Path, monkeypatch, point: str, first, again):
+    """A copy of ``sampled`` given ``first``, then ``again`` killed at ``point``."""
+    out = copy_of(sampled, tmp_path)
+    first(out)
+    kill_at(monkeypatch, point)
+    with pytest.raises(Killed):
+        again(out)
+    monkeypatch.undo()
+    return out
+
+
 def analysis_killed_at(sampled: Path, tmp_path: Path, monkeypatch, point: str) -> Path:
     """A copy of ``sampled`` analysed once (:data:`EARLIER`), then analysed again and killed
     at ``point``."""
-    out = copy_of(sampled, tmp_path)
-    analyse(out, close_figures=True, **EARLIER)
-    kill_at(monkeypatch, point)
-    with pytest.raises(Killed):
-        analyse(out, close_figures=True)
-    monkeypatch.undo()
-    return out
+    return killed_the_second_time(
+        sampled,
+        tmp_path,
+        monkeypatch,
+        point,
+        lambda out: analyse(out, close_figures=True, **EARLIER),
+        lambda out: analyse(out, close_figures=True),
+    )
+
+
+def record_killed_at(sampled: Path, tmp_path: Path, monkeypatch, point: str) -> Path:
+    """A copy of ``sampled`` recorded once, then recorded again and killed at ``point``."""
+
+    def record(out: Path) -> None:
+        record_optima(out, limit=RECORDINGS)
+
+    return killed_the_second_time(sampled, tmp_path, monkeypatch, point, record, record)
 
 
 def test_verify_seal_refuses_a_folder_an_analysis_left_part_way(sampled, tmp_path, monkeypatch):
@@ -310,12 +331,7 @@ def test_a_recording_tampered_while_its_new_digest_is_pending_ahead_differs(
 ):
     """The same for a recording sealed ahead (``recordings_next``): the one put in place and
     the one not yet, each edited, are named."""
-    out = copy_of(sampled, tmp_path)
-    record_optima(out, limit=RECORDINGS)
-    kill_at(monkeypatch, "*.rrd#1")
-    with pytest.raises(Killed):
-        record_optima(out, limit=RECORDINGS)
-    monkeypatch.undo()
+    out = record_killed_at(sampled, tmp_path, monkeypatch, "*.rrd#1")
     names = sorted(json.loads((out / SEAL_NAME).read_text())["recordings_next"])
     assert len(names) == RECORDINGS
     for name in names:
@@ -351,12 +367,7 @@ def test_a_later_reseal_keeps_the_recordings_a_killed_record_sealed_ahead(
     again completes them."""
     import lonlib.storage.thin as thin
 
-    out = copy_of(sampled, tmp_path)
-    record_optima(out, limit=RECORDINGS)
-    kill_at(monkeypatch, "*.rrd#1")
-    with pytest.raises(Killed):
-        record_optima(out, limit=RECORDINGS)
-    monkeypatch.undo()
+    out = record_killed_at(sampled, tmp_path, monkeypatch, "*.rrd#1")
     if later == "analyse":
         analyse(out, close_figures=True, conditioning=False)
     else:  # a thin that rewrites every history (these tiny ones have no row to drop)
